@@ -1,0 +1,7 @@
+//! vesselhex: structured hexahedral meshes of blood vessels.
+pub mod error;
+pub mod input;
+pub mod mesh;
+pub mod units;
+
+pub use error::{Error, Result};
