@@ -1,7 +1,27 @@
-//! vesselhex: structured hexahedral meshes of blood vessels.
+//! vesselhex: structured hexahedral meshes of blood vessels (lumen O-grid + three-layer wall)
+//! for Abaqus, CalculiX, FEBio, OpenFOAM and FSI, after De Santis et al. 2011.
+//!
+//! Data flows one way, one stage a module:
+//! [`input`] -> [`centerline`] -> [`blocks`] -> [`projection`] (over [`surface`]) -> [`volume`]
+//! -> [`annotate`] ([`quality`], [`accuracy`]) -> [`writers`] and [`report`]; [`pipeline`] runs
+//! them in order.
+pub mod accuracy;
+pub mod annotate;
+pub mod blocks;
+pub mod centerline;
+pub mod config;
 pub mod error;
 pub mod input;
 pub mod mesh;
+pub mod pipeline;
+pub mod progress;
+pub mod projection;
+pub mod quality;
+pub mod report;
+pub mod surface;
+pub mod testing;
 pub mod units;
+pub mod volume;
+pub mod writers;
 
 pub use error::{Error, Result};

@@ -1,0 +1,201 @@
+//! Block topology of one cross-section: an O-grid made of a core square block and four lateral
+//! blocks, and the rays that project it onto the lumen surface.
+//!
+//! In the section plane, with coordinates (x, y) along the frame's (normal, binormal) and lengths
+//! relative to the local radius:
+//! * the core square [-a, a]^2 carries an (N+1) x (N+1) grid of nodes, a = `core_size`;
+//! * its boundary has 4N *ring points*, numbered counter-clockwise from the corner (a, -a);
+//! * ring point k casts a ray towards its *target* on the outer block surface, a circle of
+//!   radius `ray_reach` at angle -45 deg + k 360/4N. The lumen-surface node of ring point k is where
+//!   that ray meets the surface (the paper's source-to-target rays, which keep the blocks'
+//!   orientation where surface normals would cross).
+//!
+//! The lateral blocks fill the space between the core boundary and the surface nodes with
+//! `radial_elements` layers, graded towards the wall; the wall grows beyond the surface along
+//! the same rays.
+
+use crate::centerline::CenterlineSample;
+use nalgebra::{Point3, Vector2, Vector3};
+
+/// The 2D O-grid of one cross-section, shared by every station of a branch.
+#[derive(Debug, Clone)]
+pub struct SectionTemplate {
+    /// Elements along a side of the core square.
+    pub n: usize,
+    pub core_size: f64,
+    pub ray_reach: f64,
+    /// Core grid nodes (i, j) at index j * (n+1) + i, in radius units.
+    pub core: Vec<Vector2<f64>>,
+    /// For each of the 4n ring points: index of its core grid node.
+    pub ring_core_index: Vec<usize>,
+    /// For each ring point: unit direction of its target on the outer circle.
+    pub target_dir: Vec<Vector2<f64>>,
+}
+
+impl SectionTemplate {
+    pub fn new(n: usize, core_size: f64, ray_reach: f64) -> Self {
+        let a = core_size;
+        let core = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| (i, j)))
+            .map(|(i, j)| Vector2::new(-a + 2.0 * a * i as f64 / n as f64, -a + 2.0 * a * j as f64 / n as f64))
+            .collect();
+        let idx = |i: usize, j: usize| j * (n + 1) + i;
+        let ring_core_index = (0..4 * n)
+            .map(|k| {
+                let (side, m) = (k / n, k % n);
+                match side {
+                    0 => idx(n, m),
+                    1 => idx(n - m, n),
+                    2 => idx(0, n - m),
+                    _ => idx(m, 0),
+                }
+            })
+            .collect();
+        let target_dir = (0..4 * n)
+            .map(|k| {
+                let theta = -std::f64::consts::FRAC_PI_4 + std::f64::consts::TAU * k as f64 / (4 * n) as f64;
+                Vector2::new(theta.cos(), theta.sin())
+            })
+            .collect();
+        SectionTemplate { n, core_size, ray_reach, core, ring_core_index, target_dir }
+    }
+
+    /// Number of ring points (= circumferential elements).
+    pub fn ring_len(&self) -> usize {
+        4 * self.n
+    }
+
+    /// Core quads as corner indices into `core`, counter-clockwise in (x, y).
+    pub fn core_quads(&self) -> Vec<[usize; 4]> {
+        let n = self.n;
+        let idx = |i: usize, j: usize| j * (n + 1) + i;
+        (0..n)
+            .flat_map(|j| (0..n).map(move |i| (i, j)))
+            .map(|(i, j)| [idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)])
+            .collect()
+    }
+
+    /// The ray of ring point `k` at a station: origin on the core square and unit direction
+    /// towards its target.
+    pub fn ray(&self, station: &CenterlineSample, k: usize) -> (Point3<f64>, Vector3<f64>, f64) {
+        let origin = self.place(station, &self.core[self.ring_core_index[k]]);
+        let target = self.place(station, &(self.target_dir[k] * self.ray_reach));
+        let d = target - origin;
+        let len = d.norm();
+        (origin, d / len, len)
+    }
+
+    /// A point of the section plane given in radius units.
+    pub fn place(&self, station: &CenterlineSample, xy: &Vector2<f64>) -> Point3<f64> {
+        let f = &station.frame;
+        station.point + (f.normal * xy.x + f.binormal * xy.y) * station.radius
+    }
+}
+
+/// Relative positions (0 at the core, 1 at the wall) of the lateral nodes along a ray: `cells`
+/// cells whose heights grow by `ratio` from the wall inwards.
+pub fn graded_levels(cells: usize, ratio: f64) -> Vec<f64> {
+    let heights: Vec<f64> = (0..cells).map(|j| ratio.powi(j as i32)).collect();
+    let total: f64 = heights.iter().sum();
+    // heights[j] is the j-th cell counted from the wall
+    let mut levels = vec![0.0; cells + 1];
+    let mut acc = 0.0;
+    for j in 0..cells {
+        acc += heights[j] / total;
+        levels[cells - 1 - j] = 1.0 - acc;
+    }
+    levels[0] = 0.0;
+    levels[cells] = 1.0;
+    levels
+}
+
+/// The growth ratio that gives a first cell (at the wall) of relative height `first` with
+/// `cells` cells, by bisection (the height is monotone in the ratio).
+pub fn growth_ratio_for_first_cell(cells: usize, first: f64) -> f64 {
+    let first_of = |g: f64| {
+        let total: f64 = (0..cells).map(|j| g.powi(j as i32)).sum();
+        1.0 / total
+    };
+    let (mut lo, mut hi) = (1.0, 10.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if first_of(mid) > first {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Arc-length positions of the stations between `s0` and `s1` so that each element is about
+/// `spacing(s)` long, where spacing follows the local radius or is constant.
+pub fn station_positions(s0: f64, s1: f64, spacing: impl Fn(f64) -> f64) -> Vec<f64> {
+    // Integrate ds / h(s) on a fine grid, then invert.
+    let fine = 2000;
+    let ds = (s1 - s0) / fine as f64;
+    let mut cum = vec![0.0];
+    for i in 0..fine {
+        let s = s0 + (i as f64 + 0.5) * ds;
+        cum.push(cum[i] + ds / spacing(s));
+    }
+    let total = cum[fine];
+    let count = (total.round() as usize).max(1);
+    let mut out = Vec::with_capacity(count + 1);
+    let mut j = 0;
+    for i in 0..=count {
+        let target = total * i as f64 / count as f64;
+        while j + 1 < fine && cum[j + 1] < target {
+            j += 1;
+        }
+        let w = ((target - cum[j]) / (cum[j + 1] - cum[j])).clamp(0.0, 1.0);
+        out.push(s0 + (j as f64 + w) * ds);
+    }
+    out[0] = s0;
+    out[count] = s1;
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ring_runs_counter_clockwise_around_the_core_boundary() {
+        let t = SectionTemplate::new(3, 0.5, 4.0);
+        assert_eq!(t.ring_len(), 12);
+        let mut area = 0.0;
+        for k in 0..12 {
+            let p = t.core[t.ring_core_index[k]];
+            let q = t.core[t.ring_core_index[(k + 1) % 12]];
+            assert!(((q - p).norm() - 1.0 / 3.0).abs() < 1e-12, "ring points are neighbours");
+            area += p.x * q.y - q.x * p.y;
+        }
+        assert!((area / 2.0 - 1.0).abs() < 1e-12, "signed area of the square = +1");
+        // first ring point is the corner (a, -a), its target at -45 degrees
+        assert_eq!(t.core[t.ring_core_index[0]], Vector2::new(0.5, -0.5));
+        assert!((t.target_dir[0] - Vector2::new(1.0, -1.0).normalize()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn grading_puts_the_smallest_cell_at_the_wall() {
+        let l = graded_levels(5, 1.3);
+        assert_eq!(l[0], 0.0);
+        assert_eq!(l[5], 1.0);
+        let h: Vec<f64> = l.windows(2).map(|w| w[1] - w[0]).collect();
+        for w in h.windows(2) {
+            assert!((w[0] / w[1] - 1.3).abs() < 1e-9);
+        }
+        let g = growth_ratio_for_first_cell(5, h[4]);
+        assert!((g - 1.3).abs() < 1e-9);
+    }
+
+    #[test]
+    fn stations_follow_a_varying_spacing() {
+        let s = station_positions(0.0, 10.0, |_| 1.0);
+        assert_eq!(s.len(), 11);
+        let s = station_positions(0.0, 10.0, |x| if x < 5.0 { 0.5 } else { 1.0 });
+        assert_eq!(s.len(), 16);
+        assert!((s[10] - 5.0).abs() < 1e-2);
+    }
+}

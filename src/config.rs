@@ -1,0 +1,374 @@
+//! Every meshing parameter, its preset values and the TOML case file that overrides them.
+//!
+//! Precedence: preset < case file < command line. Lengths marked "relative" are multiples of
+//! the local maximal inscribed sphere radius of the centerline; lengths ending in `_mm` are
+//! absolute, in the *output* length unit's millimetre equivalent (internally mm).
+
+use crate::error::{Error, Result};
+use crate::mesh::{Region, WallLayer};
+use crate::units::LengthUnit;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Resolution presets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// A few thousand hexes on a short artery: tests and quick looks.
+    #[default]
+    Coarse,
+    /// Everyday simulations.
+    Medium,
+    /// Thesis quality: fine boundary layer, several elements per wall layer.
+    Fine,
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "coarse" => Ok(Preset::Coarse),
+            "medium" => Ok(Preset::Medium),
+            "fine" => Ok(Preset::Fine),
+            o => Err(format!("unknown preset '{o}' (use coarse, medium or fine)")),
+        }
+    }
+}
+
+/// How the centerline is resampled and smoothed before frames are built.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct CenterlineConfig {
+    /// Resampling step, relative to the median radius.
+    pub resample_step: f64,
+    /// Passes of Laplacian smoothing of the points (end points fixed). Smoothing removes the
+    /// voxel staircase of image-based centerlines, whose kinks would tilt neighbouring
+    /// cross-sections against each other.
+    pub smoothing_passes: usize,
+    /// Passes of smoothing of the radius (the radius only scales the blocks).
+    pub radius_smoothing_passes: usize,
+    /// Extra length cut from the inlet end, relative to the local radius (on top of what the
+    /// automatic end detection removes).
+    pub trim_inlet: f64,
+    /// Extra length cut from the outlet end, relative to the local radius.
+    pub trim_outlet: f64,
+}
+
+impl Default for CenterlineConfig {
+    fn default() -> Self {
+        CenterlineConfig {
+            resample_step: 0.1,
+            smoothing_passes: 40,
+            radius_smoothing_passes: 80,
+            trim_inlet: 0.0,
+            trim_outlet: 0.0,
+        }
+    }
+}
+
+/// The lumen O-grid.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct LumenConfig {
+    /// Elements along one side of the core square; the circumference has four times as many.
+    pub core_elements: usize,
+    /// Half-side of the core square, relative to the local radius.
+    pub core_size: f64,
+    /// Elements between the core square and the wall (boundary layer direction).
+    pub radial_elements: usize,
+    /// Ratio of consecutive radial element heights, from the wall inwards (>= 1).
+    pub growth_ratio: f64,
+    /// Height of the first element at the wall, relative to the ray length from the core to
+    /// the wall. When set, it replaces `growth_ratio` (which is then solved for).
+    pub first_cell_height: Option<f64>,
+    /// Axial element length, relative to the local radius.
+    pub axial_spacing: f64,
+    /// Axial element length in mm; when set, replaces `axial_spacing`.
+    pub axial_spacing_mm: Option<f64>,
+    /// Distance of the outer block surface (the ray targets) from the centerline, relative to
+    /// the local radius. Far targets make rays nearly radial.
+    pub ray_reach: f64,
+}
+
+impl Default for LumenConfig {
+    fn default() -> Self {
+        LumenConfig {
+            core_elements: 4,
+            core_size: 0.45,
+            radial_elements: 4,
+            growth_ratio: 1.2,
+            first_cell_height: None,
+            axial_spacing: 0.5,
+            axial_spacing_mm: None,
+            ray_reach: 4.0,
+        }
+    }
+}
+
+/// One wall layer in the case file.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LayerConfig {
+    /// Fraction of the wall thickness (the three fractions are normalised to sum to 1).
+    pub fraction: f64,
+    /// Elements across the layer.
+    pub elements: usize,
+    /// Collagen fibre angle beta from the circumferential direction, degrees.
+    pub fibre_angle_deg: f64,
+}
+
+/// The three-layer wall.
+///
+/// Defaults and their sources (`../shared/docs/FORMATS.md` section 4):
+/// * layer split intima/media/adventitia 0.27/0.36/0.37 of the wall: Holzapfel et al. 2005,
+///   Am J Physiol Heart 289:H2048 (human coronary, non-atherosclerotic intimal thickening);
+/// * fibre angles: media 29 deg and adventitia 62 deg from Holzapfel, Gasser, Ogden 2000
+///   (J Elasticity 61:1-48, rabbit carotid); intima taken equal to the media, as is common when
+///   the intima is not characterised separately;
+/// * thickness 0.2 of the lumen radius: wall-to-radius ratios of systemic arteries lie around
+///   0.1-0.3 (aorta ~2 mm on r ~10 mm, carotid ~0.8 mm on r ~3 mm); set `thickness_mm` or
+///   `thickness_ratio` for your vessel.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct WallConfig {
+    /// Wall thickness relative to the local radius (tapering wall).
+    pub thickness_ratio: f64,
+    /// Constant wall thickness in mm; when set, replaces `thickness_ratio`.
+    pub thickness_mm: Option<f64>,
+    pub intima: LayerConfig,
+    pub media: LayerConfig,
+    pub adventitia: LayerConfig,
+}
+
+impl Default for WallConfig {
+    fn default() -> Self {
+        WallConfig {
+            thickness_ratio: 0.2,
+            thickness_mm: None,
+            intima: LayerConfig { fraction: 0.27, elements: 1, fibre_angle_deg: 29.0 },
+            media: LayerConfig { fraction: 0.36, elements: 1, fibre_angle_deg: 29.0 },
+            adventitia: LayerConfig { fraction: 0.37, elements: 1, fibre_angle_deg: 62.0 },
+        }
+    }
+}
+
+impl WallConfig {
+    /// The layers in radial order with normalised fractions.
+    pub fn layers(&self) -> Vec<WallLayer> {
+        let total = self.intima.fraction + self.media.fraction + self.adventitia.fraction;
+        [(Region::Intima, &self.intima), (Region::Media, &self.media), (Region::Adventitia, &self.adventitia)]
+            .into_iter()
+            .map(|(region, l)| WallLayer {
+                region,
+                thickness_fraction: l.fraction / total,
+                radial_elements: l.elements,
+                fibre_angle_deg: l.fibre_angle_deg,
+            })
+            .collect()
+    }
+}
+
+/// Everything `vesselhex mesh` needs besides the input files.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct MeshConfig {
+    pub preset: Preset,
+    /// Length unit of the input files.
+    pub units: LengthUnit,
+    /// Length unit of the written meshes (OpenFOAM is always in metres).
+    pub output_units: LengthUnit,
+    /// Output formats, e.g. ["vtu"].
+    pub formats: Vec<String>,
+    pub centerline: CenterlineConfig,
+    pub lumen: LumenConfig,
+    pub wall: WallConfig,
+}
+
+impl Default for MeshConfig {
+    fn default() -> Self {
+        MeshConfig::preset(Preset::Coarse)
+    }
+}
+
+impl MeshConfig {
+    /// The parameters of a preset.
+    pub fn preset(preset: Preset) -> Self {
+        let mut c = MeshConfig {
+            preset,
+            units: LengthUnit::Mm,
+            output_units: LengthUnit::Mm,
+            formats: vec!["vtu".into()],
+            centerline: CenterlineConfig::default(),
+            lumen: LumenConfig::default(),
+            wall: WallConfig::default(),
+        };
+        match preset {
+            Preset::Coarse => {}
+            Preset::Medium => {
+                c.lumen.core_elements = 6;
+                c.lumen.radial_elements = 7;
+                c.lumen.growth_ratio = 1.15;
+                c.lumen.axial_spacing = 0.3;
+                c.wall.media.elements = 2;
+            }
+            Preset::Fine => {
+                c.lumen.core_elements = 10;
+                c.lumen.radial_elements = 12;
+                c.lumen.growth_ratio = 1.12;
+                c.lumen.axial_spacing = 0.18;
+                c.wall.intima.elements = 2;
+                c.wall.media.elements = 3;
+                c.wall.adventitia.elements = 2;
+            }
+        }
+        c
+    }
+
+    /// Reads a case file on top of the preset it names (or the given default preset).
+    ///
+    /// The preset is applied first, then every key of the file, so a file can name a preset
+    /// and change only what differs.
+    pub fn from_case_file(path: &Path, default_preset: Preset) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, "cannot read the case file", e))?;
+        let value: toml::Table = toml::from_str(&text)
+            .map_err(|e| Error::input(path, format!("not a valid TOML case file: {e}")))?;
+        let preset = match value.get("preset") {
+            Some(toml::Value::String(s)) => s.parse::<Preset>().map_err(|e| Error::input(path, e))?,
+            Some(_) => return Err(Error::input(path, "`preset` must be a string: coarse, medium or fine")),
+            None => default_preset,
+        };
+        let base = toml::Value::try_from(MeshConfig::preset(preset))
+            .map_err(|e| Error::Config(format!("internal: cannot serialise preset: {e}")))?;
+        let merged = merge(base, toml::Value::Table(value));
+        let config: MeshConfig = merged
+            .try_into()
+            .map_err(|e| Error::input(path, format!("invalid case file: {e}. `vesselhex mesh --help` lists the keys")))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Checks ranges; a bad value is named with its key and the accepted range.
+    pub fn validate(&self) -> Result<()> {
+        let l = &self.lumen;
+        let bad = |key: &str, why: &str| Err(Error::Config(format!("{key}: {why}")));
+        if !(1..=200).contains(&l.core_elements) {
+            return bad("lumen.core_elements", "must be between 1 and 200");
+        }
+        if !(l.core_size > 0.05 && l.core_size < 0.7) {
+            return bad("lumen.core_size", "must be between 0.05 and 0.7 (relative to the radius)");
+        }
+        if !(1..=200).contains(&l.radial_elements) {
+            return bad("lumen.radial_elements", "must be between 1 and 200");
+        }
+        if !(l.growth_ratio >= 1.0 && l.growth_ratio <= 3.0) {
+            return bad("lumen.growth_ratio", "must be between 1 and 3");
+        }
+        if let Some(h) = l.first_cell_height {
+            if !(h > 0.0 && h <= 1.0 / l.radial_elements as f64) {
+                return bad(
+                    "lumen.first_cell_height",
+                    "must be positive and at most 1/radial_elements (relative to the core-to-wall ray length)",
+                );
+            }
+        }
+        if !(l.axial_spacing > 0.01 && l.axial_spacing <= 10.0) {
+            return bad("lumen.axial_spacing", "must be between 0.01 and 10 (relative to the radius)");
+        }
+        if let Some(h) = l.axial_spacing_mm {
+            if !(h > 0.0 && h.is_finite()) {
+                return bad("lumen.axial_spacing_mm", "must be a positive length");
+            }
+        }
+        if !(l.ray_reach >= 1.5 && l.ray_reach <= 50.0) {
+            return bad("lumen.ray_reach", "must be between 1.5 and 50 (relative to the radius)");
+        }
+        let w = &self.wall;
+        if !(w.thickness_ratio > 0.0 && w.thickness_ratio <= 2.0) {
+            return bad("wall.thickness_ratio", "must be between 0 and 2");
+        }
+        if let Some(t) = w.thickness_mm {
+            if !(t > 0.0 && t.is_finite()) {
+                return bad("wall.thickness_mm", "must be a positive length");
+            }
+        }
+        for (name, layer) in [("intima", &w.intima), ("media", &w.media), ("adventitia", &w.adventitia)] {
+            if !(layer.fraction > 0.0 && layer.fraction.is_finite()) {
+                return bad(&format!("wall.{name}.fraction"), "must be positive");
+            }
+            if !(1..=50).contains(&layer.elements) {
+                return bad(&format!("wall.{name}.elements"), "must be between 1 and 50");
+            }
+            if !(0.0..=90.0).contains(&layer.fibre_angle_deg) {
+                return bad(&format!("wall.{name}.fibre_angle_deg"), "must be between 0 and 90 degrees");
+            }
+        }
+        let c = &self.centerline;
+        if !(c.resample_step > 0.005 && c.resample_step <= 1.0) {
+            return bad("centerline.resample_step", "must be between 0.005 and 1 (relative to the radius)");
+        }
+        if c.trim_inlet < 0.0 || c.trim_outlet < 0.0 {
+            return bad("centerline.trim_inlet/trim_outlet", "must not be negative");
+        }
+        Ok(())
+    }
+}
+
+/// Recursively overlays `top` on `base` (tables merge key by key, anything else replaces).
+fn merge(base: toml::Value, top: toml::Value) -> toml::Value {
+    match (base, top) {
+        (toml::Value::Table(mut b), toml::Value::Table(t)) => {
+            for (k, v) in t {
+                let merged = match b.remove(&k) {
+                    Some(old) => merge(old, v),
+                    None => v,
+                };
+                b.insert(k, merged);
+            }
+            toml::Value::Table(b)
+        }
+        (_, top) => top,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_validate_and_grow() {
+        let sizes: Vec<usize> = [Preset::Coarse, Preset::Medium, Preset::Fine]
+            .iter()
+            .map(|p| {
+                let c = MeshConfig::preset(*p);
+                c.validate().unwrap();
+                c.lumen.core_elements * c.lumen.radial_elements
+            })
+            .collect();
+        assert!(sizes[0] < sizes[1] && sizes[1] < sizes[2]);
+    }
+
+    #[test]
+    fn case_file_overrides_preset_key_by_key() {
+        let dir = std::env::temp_dir().join(format!("vesselhex-config-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("case.toml");
+        std::fs::write(&p, "preset = \"medium\"\n[lumen]\nradial_elements = 9\n[wall.media]\nfraction = 0.5\nelements = 3\nfibre_angle_deg = 40.0\n").unwrap();
+        let c = MeshConfig::from_case_file(&p, Preset::Coarse).unwrap();
+        assert_eq!(c.preset, Preset::Medium);
+        assert_eq!(c.lumen.radial_elements, 9);
+        assert_eq!(c.lumen.core_elements, MeshConfig::preset(Preset::Medium).lumen.core_elements);
+        assert_eq!(c.wall.media.elements, 3);
+        std::fs::write(&p, "[lumen]\nradial_elementz = 9\n").unwrap();
+        let e = MeshConfig::from_case_file(&p, Preset::Coarse).unwrap_err().to_string();
+        assert!(e.contains("radial_elementz") && e.contains("case.toml"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn layer_fractions_are_normalised() {
+        let l = WallConfig::default().layers();
+        let s: f64 = l.iter().map(|l| l.thickness_fraction).sum();
+        assert!((s - 1.0).abs() < 1e-12);
+        assert_eq!(l[0].region, Region::Intima);
+    }
+}

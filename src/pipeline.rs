@@ -1,0 +1,283 @@
+//! The `mesh` job: read, model the centerline, project the blocks, build the volume, annotate,
+//! measure and write. One function per stage boundary, data flowing forward only.
+
+use crate::accuracy::{surface_accuracy, SurfaceAccuracy};
+use crate::annotate::annotate;
+use crate::blocks::{graded_levels, growth_ratio_for_first_cell, SectionTemplate};
+use crate::centerline::CenterlineTree;
+use crate::config::MeshConfig;
+use crate::error::{Error, Result};
+use crate::input::{read_centerlines, read_surface, Centerlines, TriangleSurface};
+use crate::mesh::VesselMesh;
+use crate::progress::Progress;
+use crate::projection::{project_branch, ProjectedBranch};
+use crate::report::{lumen_report, wall_report, BranchReport, InputReport, Report};
+use crate::surface::LumenSurface;
+use crate::volume::{build_volume, RadialLevels};
+use crate::writers::{self, WriteOptions};
+use std::path::{Path, PathBuf};
+
+/// A finished mesh with what was learnt on the way.
+pub struct Meshed {
+    pub mesh: VesselMesh,
+    pub tree: CenterlineTree,
+    pub projected: Vec<ProjectedBranch>,
+    pub accuracy: SurfaceAccuracy,
+    pub template: SectionTemplate,
+}
+
+/// Radius and surface distance must agree to within this factor, or the units differ.
+const UNIT_MISMATCH_FACTOR: f64 = 8.0;
+
+/// Checks that the centerline radius matches the distance from the centerline to the surface;
+/// a factor of 10, 100 or 1000 means the two files are in different units.
+fn check_units(surface: &LumenSurface, tree: &CenterlineTree, centerline_source: &Path) -> Result<()> {
+    let samples = &tree.branches[0].samples;
+    let step = (samples.len() / 50).max(1);
+    let mut ratios: Vec<f64> = samples
+        .iter()
+        .step_by(step)
+        .map(|s| surface.closest(&s.point).distance / s.radius)
+        .collect();
+    ratios.sort_by(f64::total_cmp);
+    let median = ratios[ratios.len() / 2];
+    if !(median < UNIT_MISMATCH_FACTOR && median > 1.0 / UNIT_MISMATCH_FACTOR) {
+        let factor = if median >= 1.0 { median } else { 1.0 / median };
+        return Err(Error::input(
+            centerline_source,
+            format!(
+                "the centerline radius and the distance from the centerline to the surface {} differ by a factor of \
+                 about {:.0} (median distance/radius = {median:.3e}): the two files are not in the same units, or \
+                 the centerline is not this vessel's. Give each file's unit (--units for the surface, \
+                 --centerline-units for the centerline)",
+                surface.source.display(),
+                factor
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Meshes a vessel from its surface and centerlines (both already in mm).
+pub fn mesh_vessel(
+    surface: &TriangleSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    progress: &mut Progress,
+) -> Result<Meshed> {
+    config.validate()?;
+    progress.stage("surface index");
+    let lumen_surface = LumenSurface::new(surface)?;
+    progress.stage("centerline");
+    let tree = CenterlineTree::build(centerlines, &config.centerline)?;
+    check_units(&lumen_surface, &tree, &centerlines.source)?;
+
+    progress.stage("projection");
+    let l = &config.lumen;
+    let template = SectionTemplate::new(l.core_elements, l.core_size, l.ray_reach);
+    let branch = &tree.branches[0];
+    let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
+    let projected = project_branch(
+        branch,
+        &template,
+        &lumen_surface,
+        &spacing,
+        config.centerline.trim_inlet,
+        config.centerline.trim_outlet,
+    )?;
+
+    progress.stage("volume");
+    let ratio = match l.first_cell_height {
+        Some(h) => growth_ratio_for_first_cell(l.radial_elements, h),
+        None => l.growth_ratio,
+    };
+    let layers = config.wall.layers();
+    let levels = RadialLevels::new(graded_levels(l.radial_elements, ratio), &layers);
+    let w = &config.wall;
+    let thickness = |r: f64| w.thickness_mm.unwrap_or(w.thickness_ratio * r);
+    let mut mesh = build_volume(&projected, &template, &levels, &layers, &thickness);
+
+    progress.stage("annotation");
+    annotate(&mut mesh);
+    if let Some((e, q)) = mesh.quality.iter().enumerate().find(|(_, q)| !(q.scaled_jacobian > 0.0)) {
+        let c = crate::mesh::face_centre(&mesh.corners(e), 0);
+        return Err(Error::Geometry(format!(
+            "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm is inverted (scaled Jacobian {:.3}): the vessel bends \
+             too sharply for the cross-sections, or the wall is too thick there. Increase \
+             centerline.smoothing_passes, reduce wall.thickness_ratio or lumen.axial_spacing",
+            surface.source.display(),
+            e + 1,
+            mesh.regions[e].name(),
+            c.x,
+            c.y,
+            c.z,
+            q.scaled_jacobian
+        )));
+    }
+
+    progress.stage("surface accuracy");
+    let accuracy = surface_accuracy(&mesh, &lumen_surface, branch, &projected)?;
+    Ok(Meshed { mesh, tree, projected: vec![projected], accuracy, template })
+}
+
+/// Everything `vesselhex mesh` was asked.
+#[derive(Debug, Clone)]
+pub struct MeshRequest {
+    pub surface: PathBuf,
+    pub centerlines: Option<PathBuf>,
+    /// Unit of the centerline file when it differs from the surface's.
+    pub centerline_units: Option<crate::units::LengthUnit>,
+    pub config: MeshConfig,
+    pub output: PathBuf,
+    pub quiet: bool,
+    /// Zero the timings so that report.json is byte-identical between runs.
+    pub reproducible: bool,
+}
+
+/// The staging folder inside the output folder; removed on failure, emptied into the output
+/// folder on success.
+struct Staging {
+    dir: PathBuf,
+    output: PathBuf,
+    created_output: bool,
+    done: bool,
+}
+
+impl Staging {
+    fn new(output: &Path) -> Result<Staging> {
+        let created_output = !output.exists();
+        std::fs::create_dir_all(output).map_err(|e| {
+            Error::io(output, "cannot create the output folder (choose another --output)", e)
+        })?;
+        let dir = output.join(format!(".vesselhex-partial-{}", std::process::id()));
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| Error::io(output, "cannot write in the output folder (choose another --output)", e))?;
+        Ok(Staging { dir, output: output.to_path_buf(), created_output, done: false })
+    }
+
+    /// Moves every written entry into the output folder, replacing older ones.
+    fn commit(mut self) -> Result<()> {
+        let entries = std::fs::read_dir(&self.dir).map_err(|e| Error::io(&self.dir, "cannot list", e))?;
+        let mut names: Vec<_> = entries.filter_map(|e| e.ok().map(|e| e.file_name())).collect();
+        names.sort();
+        for name in names {
+            let to = self.output.join(&name);
+            if to.is_dir() {
+                std::fs::remove_dir_all(&to).map_err(|e| Error::io(&to, "cannot replace", e))?;
+            }
+            std::fs::rename(self.dir.join(&name), &to).map_err(|e| Error::io(&to, "cannot move into place", e))?;
+        }
+        std::fs::remove_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, "cannot remove", e))?;
+        self.done = true;
+        Ok(())
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        if !self.done {
+            let _ = std::fs::remove_dir_all(&self.dir);
+            if self.created_output {
+                let _ = std::fs::remove_dir(&self.output);
+            }
+        }
+    }
+}
+
+/// Runs the whole job and returns the report (also written as report.json).
+pub fn run(request: &MeshRequest) -> Result<Report> {
+    let config = &request.config;
+    config.validate()?;
+    let formats: Vec<&str> = config.formats.iter().map(|s| s.as_str()).collect();
+    for f in &formats {
+        if writers::writer(f).is_none() {
+            return Err(Error::Config(format!(
+                "unknown format '{f}' in --formats (known: {})",
+                writers::format_names().join(", ")
+            )));
+        }
+    }
+    let centerline_path = request.centerlines.clone().ok_or_else(|| {
+        Error::Config(
+            "no --centerlines given: computing centerlines from the surface is not available yet; give a VMTK \
+             centerline (.vtp/.vtk) or a CSV with header x,y,z,r"
+                .into(),
+        )
+    })?;
+    let staging = Staging::new(&request.output)?;
+    let mut progress = Progress::new(request.quiet, 9);
+    progress.stage("reading");
+    let surface = read_surface(&request.surface, config.units)?;
+    let centerlines = read_centerlines(&centerline_path, request.centerline_units.unwrap_or(config.units))?;
+    let meshed = mesh_vessel(&surface, &centerlines, config, &mut progress)?;
+
+    progress.stage("writing");
+    let options = WriteOptions { length_unit: config.output_units };
+    let mut outputs = Vec::new();
+    for f in &formats {
+        let write = writers::writer(f).expect("checked above");
+        outputs.extend(write(&meshed.mesh, &options, &staging.dir)?);
+    }
+    progress.finish();
+    let mut report = build_report(&meshed, &surface, &centerline_path, config, &progress.timings);
+    if request.reproducible {
+        report.timings_s.values_mut().for_each(|t| *t = 0.0);
+    }
+    outputs.push(PathBuf::from("report.json"));
+    report.outputs = outputs.iter().map(|p| p.display().to_string()).collect();
+    let json = serde_json::to_string_pretty(&report)
+        .map_err(|e| Error::Config(format!("internal: cannot encode the report: {e}")))?;
+    writers::write_atomic(&staging.dir.join("report.json"), |w| w.write_all(json.as_bytes()))?;
+    staging.commit()?;
+    Ok(report)
+}
+
+fn build_report(
+    meshed: &Meshed,
+    surface: &TriangleSurface,
+    centerline_path: &Path,
+    config: &MeshConfig,
+    timings: &[(String, f64)],
+) -> Report {
+    let mesh = &meshed.mesh;
+    let unit = config.output_units;
+    let scale = unit.from_mm();
+    let branches = meshed
+        .tree
+        .branches
+        .iter()
+        .zip(&meshed.projected)
+        .map(|(b, p)| BranchReport {
+            name: b.name.clone(),
+            centerline_length: b.length() * scale,
+            meshed_from: p.s_start * scale,
+            meshed_to: p.s_end * scale,
+            stations: p.sections.len(),
+            circumferential_elements: meshed.template.ring_len(),
+            inlet_end: if p.inlet_closed { "closed" } else { "open" },
+            outlet_end: if p.outlet_closed { "closed" } else { "open" },
+        })
+        .collect();
+    let normals_outward = meshed.projected.first().is_none_or(|p| p.normals_outward);
+    Report {
+        vesselhex_version: env!("CARGO_PKG_VERSION"),
+        length_unit: unit,
+        length_unit_in_m: unit.in_metres(),
+        input: InputReport {
+            surface: surface.source.display().to_string(),
+            centerlines: centerline_path.display().to_string(),
+            units: config.units,
+            surface_triangles: surface.triangles.len(),
+            surface_orientation: if normals_outward { "outward" } else { "inward" },
+        },
+        elements: mesh.hexes.len(),
+        nodes: mesh.nodes.len(),
+        lumen: lumen_report(mesh),
+        wall: wall_report(mesh),
+        surface_accuracy: meshed.accuracy.clone(),
+        branches,
+        timings_s: timings.iter().cloned().collect(),
+        outputs: vec![],
+        config: config.clone(),
+    }
+}

@@ -1,0 +1,113 @@
+//! `report.json`: element counts, quality per region, surface fidelity and timings.
+
+use crate::accuracy::SurfaceAccuracy;
+use crate::mesh::{Region, VesselMesh};
+use crate::quality::Stats;
+use crate::units::LengthUnit;
+use indexmap::IndexMap;
+use serde::Serialize;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RegionReport {
+    pub elements: usize,
+    pub nodes: usize,
+    pub scaled_jacobian: Stats,
+    pub equiangle_skew: Stats,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct LayerReport {
+    pub name: &'static str,
+    pub elements: usize,
+    pub radial_elements: usize,
+    pub thickness_fraction: f64,
+    pub fibre_angle_deg: f64,
+    pub scaled_jacobian: Stats,
+    pub equiangle_skew: Stats,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct WallReport {
+    #[serde(flatten)]
+    pub all: RegionReport,
+    pub layers: Vec<LayerReport>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct BranchReport {
+    pub name: String,
+    /// Length of the centerline, and the meshed stretch along it (output unit).
+    pub centerline_length: f64,
+    pub meshed_from: f64,
+    pub meshed_to: f64,
+    pub stations: usize,
+    pub circumferential_elements: usize,
+    pub inlet_end: &'static str,
+    pub outlet_end: &'static str,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct InputReport {
+    pub surface: String,
+    pub centerlines: String,
+    pub units: LengthUnit,
+    pub surface_triangles: usize,
+    /// +1: the surface triangles face out of the lumen; -1: into it.
+    pub surface_orientation: &'static str,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    pub vesselhex_version: &'static str,
+    pub length_unit: LengthUnit,
+    pub length_unit_in_m: f64,
+    pub input: InputReport,
+    pub elements: usize,
+    pub nodes: usize,
+    pub lumen: RegionReport,
+    pub wall: WallReport,
+    pub surface_accuracy: SurfaceAccuracy,
+    pub branches: Vec<BranchReport>,
+    /// Seconds per stage (zeros with `--reproducible`, so the report is byte-identical).
+    pub timings_s: IndexMap<String, f64>,
+    pub outputs: Vec<String>,
+    pub config: crate::config::MeshConfig,
+}
+
+fn region_report(mesh: &VesselMesh, range: std::ops::Range<usize>) -> RegionReport {
+    RegionReport {
+        elements: range.len(),
+        nodes: mesh.nodes_of(range.clone()).len(),
+        scaled_jacobian: Stats::of(mesh.quality[range.clone()].iter().map(|q| q.scaled_jacobian)),
+        equiangle_skew: Stats::of(mesh.quality[range].iter().map(|q| q.equiangle_skew)),
+    }
+}
+
+pub fn lumen_report(mesh: &VesselMesh) -> RegionReport {
+    region_report(mesh, mesh.lumen_range())
+}
+
+pub fn wall_report(mesh: &VesselMesh) -> WallReport {
+    let layers = mesh
+        .layers
+        .iter()
+        .map(|l| {
+            let r = region_report(mesh, mesh.region_range(l.region));
+            LayerReport {
+                name: l.region.name(),
+                elements: r.elements,
+                radial_elements: l.radial_elements,
+                thickness_fraction: l.thickness_fraction,
+                fibre_angle_deg: l.fibre_angle_deg,
+                scaled_jacobian: r.scaled_jacobian,
+                equiangle_skew: r.equiangle_skew,
+            }
+        })
+        .collect();
+    WallReport { all: region_report(mesh, mesh.wall_range()), layers }
+}
+
+/// Quality of a region, for callers that need one figure.
+pub fn region_quality(mesh: &VesselMesh, region: Region) -> Stats {
+    Stats::of(mesh.quality[mesh.region_range(region)].iter().map(|q| q.scaled_jacobian))
+}

@@ -1,0 +1,198 @@
+//! Geometric queries on the lumen surface: first ray hit and exact closest point, both through
+//! parry's bounding-volume hierarchy in double precision.
+//!
+//! The meshing algorithms only see [`LumenSurface`]; parry's types stay in this file.
+
+use crate::error::{Error, Result};
+use crate::input::TriangleSurface;
+use nalgebra::{Point3, Vector3};
+use parry3d_f64::math::Vector as PVec;
+use parry3d_f64::query::Ray;
+use parry3d_f64::shape::{CompositeShapeRef, TriMesh};
+use std::path::PathBuf;
+
+/// Where a ray meets the surface.
+#[derive(Debug, Clone, Copy)]
+pub struct RayHit {
+    pub point: Point3<f64>,
+    /// Distance from the ray origin.
+    pub distance: f64,
+    pub triangle: u32,
+}
+
+/// The closest point of the surface to a query point.
+#[derive(Debug, Clone, Copy)]
+pub struct Closest {
+    pub point: Point3<f64>,
+    pub distance: f64,
+    pub triangle: u32,
+}
+
+/// A triangulated surface ready for queries.
+pub struct LumenSurface {
+    trimesh: TriMesh,
+    pub vertices: Vec<Point3<f64>>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Unit normal of each triangle, as wound in the file (may face in or out).
+    pub normals: Vec<Vector3<f64>>,
+    pub source: PathBuf,
+}
+
+fn to_p(v: &Point3<f64>) -> PVec {
+    PVec::new(v.x, v.y, v.z)
+}
+fn to_pv(v: &Vector3<f64>) -> PVec {
+    PVec::new(v.x, v.y, v.z)
+}
+
+impl LumenSurface {
+    pub fn new(surface: &TriangleSurface) -> Result<Self> {
+        Self::from_parts(surface.vertices.clone(), surface.triangles.clone(), surface.source.clone())
+    }
+
+    pub fn from_parts(vertices: Vec<Point3<f64>>, triangles: Vec<[u32; 3]>, source: PathBuf) -> Result<Self> {
+        if triangles.is_empty() {
+            return Err(Error::input(&source, "the surface has no triangles"));
+        }
+        let normals = triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| vertices[i as usize]);
+                let n = (b - a).cross(&(c - a));
+                let len = n.norm();
+                if len > 0.0 {
+                    n / len
+                } else {
+                    Vector3::zeros()
+                }
+            })
+            .collect();
+        let pv = vertices.iter().map(to_p).collect();
+        let trimesh = TriMesh::new(pv, triangles.clone())
+            .map_err(|e| Error::input(&source, format!("cannot index the surface triangles: {e:?}")))?;
+        Ok(LumenSurface { trimesh, vertices, triangles, normals, source })
+    }
+
+    /// The first intersection of the ray `origin + t dir` (|dir| = 1) with the surface for
+    /// 0 <= t <= max_distance.
+    pub fn first_hit(&self, origin: &Point3<f64>, dir: &Vector3<f64>, max_distance: f64) -> Option<RayHit> {
+        let ray = Ray::new(to_p(origin), to_pv(dir));
+        let (tri, hit) = CompositeShapeRef(&self.trimesh).cast_local_ray_and_get_normal(&ray, max_distance, false)?;
+        Some(RayHit { point: origin + dir * hit.time_of_impact, distance: hit.time_of_impact, triangle: tri })
+    }
+
+    /// Exact closest point on the triangles (not the nearest vertex).
+    pub fn closest(&self, p: &Point3<f64>) -> Closest {
+        let q = to_p(p);
+        match CompositeShapeRef(&self.trimesh).project_local_point_and_get_feature(q, f64::MAX) {
+            Some((tri, proj, _)) => {
+                let c = Point3::new(proj.point.x, proj.point.y, proj.point.z);
+                Closest { point: c, distance: (c - p).norm(), triangle: tri }
+            }
+            None => Closest { point: *p, distance: f64::INFINITY, triangle: u32::MAX },
+        }
+    }
+
+    /// Axis-aligned bounding box (min, max).
+    pub fn bounding_box(&self) -> (Point3<f64>, Point3<f64>) {
+        let mut lo = Point3::from([f64::INFINITY; 3]);
+        let mut hi = Point3::from([f64::NEG_INFINITY; 3]);
+        for v in &self.vertices {
+            for k in 0..3 {
+                lo[k] = lo[k].min(v[k]);
+                hi[k] = hi[k].max(v[k]);
+            }
+        }
+        (lo, hi)
+    }
+}
+
+/// Exact distance from a point to a triangle (Eberly's region classification), used where a
+/// query is against a handful of triangles and a BVH would be overkill, and by tests as an
+/// oracle independent of parry.
+pub fn point_triangle_distance(p: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>, c: &Point3<f64>) -> f64 {
+    (closest_point_on_triangle(p, a, b, c) - p).norm()
+}
+
+/// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
+pub fn closest_point_on_triangle(p: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>, c: &Point3<f64>) -> Point3<f64> {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(&ap);
+    let d2 = ac.dot(&ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return *a;
+    }
+    let bp = p - b;
+    let d3 = ab.dot(&bp);
+    let d4 = ac.dot(&bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return *b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let d5 = ab.dot(&cp);
+    let d6 = ac.dot(&cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return *c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    a + ab * (vb * denom) + ac * (vc * denom)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn octahedron() -> LumenSurface {
+        let v = vec![
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(-1.0, 0.0, 0.0),
+            Point3::new(0.0, 1.0, 0.0),
+            Point3::new(0.0, -1.0, 0.0),
+            Point3::new(0.0, 0.0, 1.0),
+            Point3::new(0.0, 0.0, -1.0),
+        ];
+        let t = vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+        LumenSurface::from_parts(v, t, "octahedron".into()).unwrap()
+    }
+
+    #[test]
+    fn ray_from_inside_hits_the_face_it_points_at() {
+        let s = octahedron();
+        let d = Vector3::new(1.0, 1.0, 1.0).normalize();
+        let h = s.first_hit(&Point3::origin(), &d, 10.0).unwrap();
+        // plane x + y + z = 1
+        assert!((h.point.x + h.point.y + h.point.z - 1.0).abs() < 1e-14);
+        assert_eq!(h.triangle, 0);
+        assert!(s.first_hit(&Point3::new(5.0, 5.0, 5.0), &d, 10.0).is_none());
+    }
+
+    #[test]
+    fn closest_point_agrees_with_brute_force() {
+        let s = octahedron();
+        for p in [Point3::new(0.3, 0.2, 0.1), Point3::new(2.0, -1.0, 0.5), Point3::new(0.0, 0.0, 3.0)] {
+            let brute = s
+                .triangles
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| s.vertices[i as usize]);
+                    point_triangle_distance(&p, &a, &b, &c)
+                })
+                .fold(f64::INFINITY, f64::min);
+            assert!((s.closest(&p).distance - brute).abs() < 1e-12);
+        }
+    }
+}

@@ -1,0 +1,55 @@
+//! Writers: one module per format, each reading only the annotated [`VesselMesh`].
+//!
+//! `--formats` names rows of [`WRITERS`]; adding a solver is one module and one row.
+
+use crate::error::Result;
+use crate::mesh::VesselMesh;
+use crate::units::LengthUnit;
+use std::path::{Path, PathBuf};
+
+pub mod vtu;
+
+/// What every writer may need besides the mesh.
+#[derive(Debug, Clone)]
+pub struct WriteOptions {
+    /// Length unit of FE outputs (OpenFOAM is always in metres).
+    pub length_unit: LengthUnit,
+}
+
+/// A writer puts its files under `dir` (a staging folder) and returns their paths relative to it.
+pub type WriterFn = fn(&VesselMesh, &WriteOptions, &Path) -> Result<Vec<PathBuf>>;
+
+/// The format table: name, what it writes, writer.
+pub const WRITERS: &[(&str, &str, WriterFn)] = &[("vtu", "mesh.vtu: VTK XML unstructured grid for ParaView", vtu::write_vtu)];
+
+/// The writer of a format name.
+pub fn writer(name: &str) -> Option<WriterFn> {
+    WRITERS.iter().find(|w| w.0 == name).map(|w| w.2)
+}
+
+/// Names of all formats, for messages.
+pub fn format_names() -> Vec<&'static str> {
+    WRITERS.iter().map(|w| w.0).collect()
+}
+
+/// Writes a file through a temporary name in the same folder and renames it when complete,
+/// so an interrupted write never leaves a half-written file under the final name.
+pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<()> {
+    use crate::error::Error;
+    let tmp = path.with_extension(format!(
+        "{}.partial",
+        path.extension().and_then(|e| e.to_str()).unwrap_or("out")
+    ));
+    let result = (|| {
+        let file = std::fs::File::create(&tmp)?;
+        let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
+        write(&mut w)?;
+        let file = w.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    result.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        Error::io(path, "cannot write", e)
+    })
+}
