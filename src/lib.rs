@@ -19,6 +19,7 @@ pub mod projection;
 pub mod quality;
 pub mod report;
 pub mod surface;
+pub mod synthetic;
 pub mod testing;
 pub mod units;
 pub mod volume;
