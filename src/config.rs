@@ -224,19 +224,22 @@ impl MeshConfig {
         c
     }
 
-    /// Reads a case file on top of the preset it names (or the given default preset).
+    /// Reads a case file on top of a preset: `forced_preset` (the command line's) if given,
+    /// else the one the file names, else coarse.
     ///
     /// The preset is applied first, then every key of the file, so a file can name a preset
     /// and change only what differs.
-    pub fn from_case_file(path: &Path, default_preset: Preset) -> Result<Self> {
+    pub fn from_case_file(path: &Path, forced_preset: Option<Preset>) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, "cannot read the case file", e))?;
         let value: toml::Table = toml::from_str(&text)
             .map_err(|e| Error::input(path, format!("not a valid TOML case file: {e}")))?;
-        let preset = match value.get("preset") {
-            Some(toml::Value::String(s)) => s.parse::<Preset>().map_err(|e| Error::input(path, e))?,
+        let mut value = value;
+        let file_preset = match value.remove("preset") {
+            Some(toml::Value::String(s)) => Some(s.parse::<Preset>().map_err(|e| Error::input(path, e))?),
             Some(_) => return Err(Error::input(path, "`preset` must be a string: coarse, medium or fine")),
-            None => default_preset,
+            None => None,
         };
+        let preset = forced_preset.or(file_preset).unwrap_or_default();
         let base = toml::Value::try_from(MeshConfig::preset(preset))
             .map_err(|e| Error::Config(format!("internal: cannot serialise preset: {e}")))?;
         let merged = merge(base, toml::Value::Table(value));
@@ -353,13 +356,17 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("case.toml");
         std::fs::write(&p, "preset = \"medium\"\n[lumen]\nradial_elements = 9\n[wall.media]\nfraction = 0.5\nelements = 3\nfibre_angle_deg = 40.0\n").unwrap();
-        let c = MeshConfig::from_case_file(&p, Preset::Coarse).unwrap();
+        let c = MeshConfig::from_case_file(&p, None).unwrap();
         assert_eq!(c.preset, Preset::Medium);
         assert_eq!(c.lumen.radial_elements, 9);
         assert_eq!(c.lumen.core_elements, MeshConfig::preset(Preset::Medium).lumen.core_elements);
         assert_eq!(c.wall.media.elements, 3);
+        let forced = MeshConfig::from_case_file(&p, Some(Preset::Fine)).unwrap();
+        assert_eq!(forced.preset, Preset::Fine);
+        assert_eq!(forced.lumen.radial_elements, 9);
+        assert_eq!(forced.lumen.core_elements, MeshConfig::preset(Preset::Fine).lumen.core_elements);
         std::fs::write(&p, "[lumen]\nradial_elementz = 9\n").unwrap();
-        let e = MeshConfig::from_case_file(&p, Preset::Coarse).unwrap_err().to_string();
+        let e = MeshConfig::from_case_file(&p, None).unwrap_err().to_string();
         assert!(e.contains("radial_elementz") && e.contains("case.toml"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -75,7 +75,20 @@ impl LumenSurface {
 
     /// The first intersection of the ray `origin + t dir` (|dir| = 1) with the surface for
     /// 0 <= t <= max_distance.
+    ///
+    /// A ray through a shared edge or vertex can slip between the triangles' individual tests
+    /// (seen on watertight fixtures with rays along their vertex rings), so a miss is retried
+    /// from origins shifted sideways by a nanometre-scale amount, far below any real hole.
     pub fn first_hit(&self, origin: &Point3<f64>, dir: &Vector3<f64>, max_distance: f64) -> Option<RayHit> {
+        self.cast(origin, dir, max_distance).or_else(|| {
+            let u = crate::centerline::any_perpendicular(dir);
+            let v = dir.cross(&u);
+            let eps = 1e-9 * max_distance.max(1.0);
+            [u, v, -u, -v].iter().find_map(|side| self.cast(&(origin + side * eps), dir, max_distance))
+        })
+    }
+
+    fn cast(&self, origin: &Point3<f64>, dir: &Vector3<f64>, max_distance: f64) -> Option<RayHit> {
         let ray = Ray::new(to_p(origin), to_pv(dir));
         let (tri, hit) = CompositeShapeRef(&self.trimesh).cast_local_ray_and_get_normal(&ray, max_distance, false)?;
         Some(RayHit { point: origin + dir * hit.time_of_impact, distance: hit.time_of_impact, triangle: tri })
