@@ -15,6 +15,7 @@ use crate::report::{lumen_report, wall_report, BranchReport, InputReport, Report
 use crate::surface::LumenSurface;
 use crate::volume::{build_volume, RadialLevels};
 use crate::writers::{self, WriteOptions};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// A finished mesh with what was learnt on the way.
@@ -58,6 +59,38 @@ fn check_units(surface: &LumenSurface, tree: &CenterlineTree, centerline_source:
     Ok(())
 }
 
+/// Winding numbers below this (in magnitude) mean a point is outside the lumen.
+const INSIDE_WINDING: f64 = 0.5;
+
+/// Checks that the centerline runs inside the lumen and finds which way the surface's triangles
+/// face (true: out of the lumen), from winding numbers at points along the centerline. The
+/// first and last tenth are left out: near an open end the winding number drops towards 1/2.
+fn check_inside(surface: &LumenSurface, tree: &CenterlineTree, centerline_source: &Path) -> Result<bool> {
+    let samples = &tree.branches[0].samples;
+    let n = samples.len();
+    let probes: Vec<&crate::centerline::CenterlineSample> =
+        (0..=20).map(|i| &samples[(n - 1) * (2 + i * 16 / 20) / 20]).collect();
+    let w: Vec<f64> = probes.par_iter().map(|s| surface.winding_number(&s.point)).collect();
+    let total: f64 = w.iter().sum();
+    if let Some((k, wk)) = w.iter().enumerate().find(|(_, x)| x.abs() < INSIDE_WINDING) {
+        let outside = w.iter().filter(|x| x.abs() < INSIDE_WINDING).count();
+        let p = probes[k];
+        return Err(Error::input(
+            centerline_source,
+            format!(
+                "the centerline lies outside the lumen surface {} at ({:.3}, {:.3}, {:.3}) mm, {:.2} mm along it                  (winding number {wk:.2}; {outside} of {} probed points are outside): check that the centerline                  belongs to this surface and that both are in the same units and coordinate system",
+                surface.source.display(),
+                p.point.x,
+                p.point.y,
+                p.point.z,
+                p.s,
+                w.len()
+            ),
+        ));
+    }
+    Ok(total > 0.0)
+}
+
 /// Meshes a vessel from its surface and centerlines (both already in mm).
 pub fn mesh_vessel(
     surface: &TriangleSurface,
@@ -71,6 +104,7 @@ pub fn mesh_vessel(
     progress.stage("centerline");
     let tree = CenterlineTree::build(centerlines, &config.centerline)?;
     check_units(&lumen_surface, &tree, &centerlines.source)?;
+    let normals_outward = check_inside(&lumen_surface, &tree, &centerlines.source)?;
 
     progress.stage("projection");
     let l = &config.lumen;
@@ -84,6 +118,7 @@ pub fn mesh_vessel(
         &spacing,
         config.centerline.trim_inlet,
         config.centerline.trim_outlet,
+        normals_outward,
     )?;
 
     progress.stage("volume");

@@ -113,36 +113,6 @@ fn cast_section(
     (probe, section)
 }
 
-/// The surface's orientation seen from the centerline: +1 if triangle normals face out of the
-/// lumen, -1 if in. Decided by a vote of all rays of all samples, so a few defects do not flip it.
-fn orientation(template: &SectionTemplate, surface: &LumenSurface, samples: &[CenterlineSample]) -> f64 {
-    let votes: i64 = samples
-        .par_iter()
-        .map(|s| {
-            (0..template.ring_len())
-                .map(|k| {
-                    let (origin, dir, len) = template.ray(s, k);
-                    surface.first_hit(&origin, &dir, len * RAY_SLACK).map_or(0, |h| {
-                        let d = surface.normals[h.triangle as usize].dot(&dir);
-                        if d > 0.0 {
-                            1
-                        } else if d < 0.0 {
-                            -1
-                        } else {
-                            0
-                        }
-                    })
-                })
-                .sum::<i64>()
-        })
-        .sum();
-    if votes >= 0 {
-        1.0
-    } else {
-        -1.0
-    }
-}
-
 /// Finds the meshable part of a branch and projects its stations.
 pub fn project_branch(
     branch: &Branch,
@@ -151,9 +121,10 @@ pub fn project_branch(
     spacing: &(dyn Fn(&CenterlineSample) -> f64 + Sync),
     trim_inlet: f64,
     trim_outlet: f64,
+    normals_outward: bool,
 ) -> Result<ProjectedBranch> {
     let samples = &branch.samples;
-    let orient = orientation(template, surface, samples);
+    let orient = if normals_outward { 1.0 } else { -1.0 };
     let probes: Vec<Probe> = samples.par_iter().map(|s| cast_section(template, surface, s, orient).0).collect();
 
     let first_clean = probes.iter().position(Probe::clean);
@@ -223,5 +194,5 @@ pub fn project_branch(
         }
         out.push(section);
     }
-    Ok(ProjectedBranch { sections: out, s_start, s_end, inlet_closed, outlet_closed, normals_outward: orient > 0.0 })
+    Ok(ProjectedBranch { sections: out, s_start, s_end, inlet_closed, outlet_closed, normals_outward })
 }

@@ -1,0 +1,210 @@
+//! The `vesselhex mesh` command end to end: outputs, determinism, the independent quality check
+//! by VTK, and clear errors on bad input that leave no file behind.
+
+mod common;
+
+use common::{fixture, files_under, mesh_cli, path_str, temp_dir, vesselhex};
+use std::path::Path;
+
+#[test]
+fn outputs_and_report_keys() {
+    let (stl, csv) = fixture("curved");
+    let out = temp_dir("outputs");
+    let r = mesh_cli(&stl, &csv, &out, &[]);
+    assert!(out.join("mesh.vtu").exists());
+    assert_eq!(r["length_unit"], "mm");
+    assert_eq!(r["length_unit_in_m"], 0.001);
+    for region in ["lumen", "wall"] {
+        for key in ["elements", "nodes"] {
+            assert!(r[region][key].as_u64().unwrap() > 0, "{region}.{key}");
+        }
+        for key in ["scaled_jacobian", "equiangle_skew"] {
+            for stat in ["min", "mean", "max"] {
+                assert!(r[region][key][stat].is_number(), "{region}.{key}.{stat}");
+            }
+        }
+    }
+    let layers = r["wall"]["layers"].as_array().unwrap();
+    let names: Vec<&str> = layers.iter().map(|l| l["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["intima", "media", "adventitia"]);
+    let total: u64 = layers.iter().map(|l| l["elements"].as_u64().unwrap()).sum();
+    assert_eq!(total, r["wall"]["elements"].as_u64().unwrap());
+    for l in layers {
+        assert!(l["fibre_angle_deg"].is_number() && l["scaled_jacobian"]["min"].is_number());
+    }
+    for k in ["node_to_surface_um", "surface_to_mesh_um"] {
+        assert!(r["surface_accuracy"][k]["mean"].is_number() && r["surface_accuracy"][k]["max"].is_number());
+    }
+    assert!(r["timings_s"].as_object().unwrap().len() >= 5);
+    // nothing else left in the output folder
+    let mut names: Vec<String> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    names.sort();
+    assert_eq!(names, ["mesh.vtu", "report.json"]);
+}
+
+#[test]
+fn output_units_scale_the_vtu_but_not_the_figures() {
+    let (stl, csv) = fixture("straight");
+    let mm = temp_dir("units-mm");
+    let m = temp_dir("units-m");
+    let a = mesh_cli(&stl, &csv, &mm, &["--reproducible"]);
+    let b = mesh_cli(&stl, &csv, &m, &["--reproducible", "--output-units", "m"]);
+    assert_eq!(b["length_unit"], "m");
+    assert_eq!(b["length_unit_in_m"], 1.0);
+    assert_eq!(a["lumen"]["elements"], b["lumen"]["elements"]);
+    // The same vessel read in centimetres is ten times larger: same element counts.
+    let cm = temp_dir("units-cm");
+    let c = mesh_cli(&stl, &csv, &cm, &["--units", "cm"]);
+    assert_eq!(a["lumen"]["elements"], c["lumen"]["elements"]);
+}
+
+#[test]
+fn two_runs_are_byte_identical_whatever_the_thread_count() {
+    let (stl, csv) = fixture("helical");
+    let a = temp_dir("det-a");
+    let b = temp_dir("det-b");
+    mesh_cli(&stl, &csv, &a, &["--reproducible", "--threads", "1"]);
+    mesh_cli(&stl, &csv, &b, &["--reproducible", "--threads", "2"]);
+    for f in ["mesh.vtu", "report.json"] {
+        let x = std::fs::read(a.join(f)).unwrap();
+        let y = std::fs::read(b.join(f)).unwrap();
+        assert!(x == y, "{f} differs between runs");
+    }
+}
+
+#[test]
+fn vtk_mesh_quality_agrees_with_the_report() {
+    let Some(py) = common::python_with("vtk") else { return };
+    for name in ["curved", "aaa"] {
+        let (stl, csv) = fixture(name);
+        let out = temp_dir(&format!("vtk-{name}"));
+        let r = mesh_cli(&stl, &csv, &out, &[]);
+        let script = r#"
+import sys, vtk
+r = vtk.vtkXMLUnstructuredGridReader(); r.SetFileName(sys.argv[1]); r.Update()
+q = vtk.vtkMeshQuality(); q.SetInputConnection(r.GetOutputPort()); q.SetHexQualityMeasureToScaledJacobian(); q.Update()
+a = q.GetOutput().GetCellData().GetArray("Quality")
+print(r.GetOutput().GetNumberOfCells(), min(a.GetValue(i) for i in range(a.GetNumberOfTuples())))
+"#;
+        let o = std::process::Command::new(&py).args(["-c", script, path_str(&out.join("mesh.vtu"))]).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = String::from_utf8(o.stdout).unwrap();
+        let mut it = text.split_whitespace();
+        let cells: u64 = it.next().unwrap().parse().unwrap();
+        let vtk_min: f64 = it.next().unwrap().parse().unwrap();
+        let ours = r["lumen"]["scaled_jacobian"]["min"].as_f64().unwrap().min(r["wall"]["scaled_jacobian"]["min"].as_f64().unwrap());
+        println!("{name}: vtkMeshQuality min scaled Jacobian {vtk_min:.6}, report {ours:.6}");
+        assert_eq!(cells, r["elements"].as_u64().unwrap());
+        assert!((vtk_min - ours).abs() <= 0.02, "{name}: VTK {vtk_min} vs report {ours}");
+    }
+}
+
+/// Runs a failing command and checks the error contract: non-zero exit, one line naming `what`,
+/// no panic, nothing left in the output folder.
+fn assert_clean_failure(args: &[&str], out: &Path, what: &str) -> String {
+    let o = vesselhex(args);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(!o.status.success(), "expected a failure for {args:?}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+    assert!(err.contains(what), "the error should name {what}: {err}");
+    assert!(files_under(out).is_empty(), "files left behind: {:?}", files_under(out));
+    err
+}
+
+fn mesh_args<'a>(surface: &'a str, cl: &'a str, out: &'a str) -> Vec<&'a str> {
+    vec!["mesh", "--surface", surface, "--centerlines", cl, "--output", out, "--quiet"]
+}
+
+#[test]
+fn bad_inputs_fail_clearly_and_leave_nothing() {
+    let dir = temp_dir("bad");
+    let (stl, csv) = fixture("straight");
+    let (stl, csv) = (path_str(&stl).to_string(), path_str(&csv).to_string());
+    let out = dir.join("out");
+    let outs = path_str(&out).to_string();
+
+    // truncated binary STL
+    let bytes = std::fs::read(&stl).unwrap();
+    let truncated = dir.join("truncated.stl");
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    assert_clean_failure(&mesh_args(path_str(&truncated), &csv, &outs), &out, "truncated.stl");
+    // empty STL
+    let empty = dir.join("empty.stl");
+    std::fs::write(&empty, b"").unwrap();
+    assert_clean_failure(&mesh_args(path_str(&empty), &csv, &outs), &out, "empty.stl");
+    // NaN coordinates
+    let nan = dir.join("nan.stl");
+    std::fs::write(&nan, "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 nan\nvertex 0 1 0\nendloop\nendfacet\nendsolid x\n").unwrap();
+    assert_clean_failure(&mesh_args(path_str(&nan), &csv, &outs), &out, "nan.stl");
+    // centerline without radius
+    let norad = dir.join("norad.csv");
+    std::fs::write(&norad, "x,y,z\n0,0,0\n0,0,30\n").unwrap();
+    assert_clean_failure(&mesh_args(&stl, path_str(&norad), &outs), &out, "norad.csv");
+    // centerline outside the surface: shifted sideways by 2.5 radii
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let shifted: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i == 0 {
+                return format!("{l}\n");
+            }
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            format!("{},{},{},{}\n", v[0] + 5.0, v[1], v[2], v[3])
+        })
+        .collect();
+    let outside = dir.join("outside.csv");
+    std::fs::write(&outside, shifted).unwrap();
+    assert_clean_failure(&mesh_args(&stl, path_str(&outside), &outs), &out, "outside");
+    // centerline in metres while the surface is in mm: units off by 1000
+    let metres: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i == 0 {
+                return format!("{l}\n");
+            }
+            let v: Vec<f64> = l.split(',').map(|x| x.parse::<f64>().unwrap() / 1000.0).collect();
+            format!("{},{},{},{}\n", v[0], v[1], v[2], v[3])
+        })
+        .collect();
+    let m = dir.join("metres.csv");
+    std::fs::write(&m, metres).unwrap();
+    let e = assert_clean_failure(&mesh_args(&stl, path_str(&m), &outs), &out, "metres.csv");
+    assert!(e.contains("units"), "{e}");
+    // a hole in the middle of the surface: rays miss
+    let holed = dir.join("holed.stl");
+    write_stl_without_triangles_near(&stl, &holed, 15.0);
+    let e = assert_clean_failure(&mesh_args(path_str(&holed), &csv, &outs), &out, "holed.stl");
+    assert!(e.contains("miss"), "{e}");
+    // unwritable output folder: its parent is a file
+    let blocker = dir.join("blocker");
+    std::fs::write(&blocker, b"x").unwrap();
+    let bad_out = blocker.join("out");
+    let o = vesselhex(&mesh_args(&stl, &csv, path_str(&bad_out)));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("output") && !err.contains("panicked"), "{err}");
+    // unknown format
+    let o = vesselhex(&["mesh", "--surface", &stl, "--centerlines", &csv, "--output", &outs, "--formats", "vtu,nastran"]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("nastran"));
+    assert!(files_under(&out).is_empty());
+}
+
+/// Copies a binary STL, dropping the triangles whose centroid lies within 1 mm of z = `z`.
+fn write_stl_without_triangles_near(src: &str, dst: &Path, z: f64) {
+    let b = std::fs::read(src).unwrap();
+    let n = u32::from_le_bytes(b[80..84].try_into().unwrap()) as usize;
+    let mut kept = vec![];
+    for t in 0..n {
+        let rec = &b[84 + 50 * t..84 + 50 * (t + 1)];
+        let zc: f64 = (0..3).map(|v| f32::from_le_bytes(rec[12 + 12 * v + 8..12 + 12 * v + 12].try_into().unwrap()) as f64).sum::<f64>() / 3.0;
+        if (zc - z).abs() > 1.0 {
+            kept.extend_from_slice(rec);
+        }
+    }
+    let mut out = b[..80].to_vec();
+    out.extend_from_slice(&((kept.len() / 50) as u32).to_le_bytes());
+    out.extend_from_slice(&kept);
+    std::fs::write(dst, out).unwrap();
+}
