@@ -74,15 +74,17 @@ fn two_runs_are_byte_identical_whatever_the_thread_count() {
 
 #[test]
 fn vtk_mesh_quality_agrees_with_the_report() {
-    let Some(py) = common::python_with("vtk") else { return };
+    let Some(py) = common::python_with("vtkmodules.vtkFiltersVerdict") else { return };
     for name in ["curved", "aaa"] {
         let (stl, csv) = fixture(name);
         let out = temp_dir(&format!("vtk-{name}"));
         let r = mesh_cli(&stl, &csv, &out, &[]);
         let script = r#"
-import sys, vtk
-r = vtk.vtkXMLUnstructuredGridReader(); r.SetFileName(sys.argv[1]); r.Update()
-q = vtk.vtkMeshQuality(); q.SetInputConnection(r.GetOutputPort()); q.SetHexQualityMeasureToScaledJacobian(); q.Update()
+import sys
+from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+from vtkmodules.vtkFiltersVerdict import vtkMeshQuality
+r = vtkXMLUnstructuredGridReader(); r.SetFileName(sys.argv[1]); r.Update()
+q = vtkMeshQuality(); q.SetInputConnection(r.GetOutputPort()); q.SetHexQualityMeasureToScaledJacobian(); q.Update()
 a = q.GetOutput().GetCellData().GetArray("Quality")
 print(r.GetOutput().GetNumberOfCells(), min(a.GetValue(i) for i in range(a.GetNumberOfTuples())))
 "#;
