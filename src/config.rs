@@ -43,7 +43,9 @@ pub struct CenterlineConfig {
     pub resample_step: f64,
     /// Passes of Laplacian smoothing of the points (end points fixed). Smoothing removes the
     /// voxel staircase of image-based centerlines, whose kinks would tilt neighbouring
-    /// cross-sections against each other.
+    /// cross-sections against each other until they cross inside the wall. With the default
+    /// step, 200 passes smooth over about one radius (standard deviation step * sqrt(passes/2)):
+    /// a lumen cannot bend more tightly than that anyway.
     pub smoothing_passes: usize,
     /// Passes of smoothing of the radius (the radius only scales the blocks).
     pub radius_smoothing_passes: usize,
@@ -58,8 +60,8 @@ impl Default for CenterlineConfig {
     fn default() -> Self {
         CenterlineConfig {
             resample_step: 0.1,
-            smoothing_passes: 40,
-            radius_smoothing_passes: 80,
+            smoothing_passes: 200,
+            radius_smoothing_passes: 200,
             trim_inlet: 0.0,
             trim_outlet: 0.0,
         }
@@ -117,6 +119,18 @@ pub struct LayerConfig {
     pub fibre_angle_deg: f64,
 }
 
+/// The direction the wall grows in from each lumen-surface node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum WallGrowth {
+    /// Along the meshed lumen surface's normal (smoothed): wall elements stay orthogonal and
+    /// valid where rays meet a rippled real surface at a grazing angle.
+    #[default]
+    Normal,
+    /// Along the projection ray, as De Santis et al. 2011 do.
+    Ray,
+}
+
 /// The three-layer wall.
 ///
 /// Defaults and their sources (`../shared/docs/FORMATS.md` section 4):
@@ -135,6 +149,8 @@ pub struct WallConfig {
     pub thickness_ratio: f64,
     /// Constant wall thickness in mm; when set, replaces `thickness_ratio`.
     pub thickness_mm: Option<f64>,
+    /// Direction of growth: "normal" (default) or "ray".
+    pub growth: WallGrowth,
     pub intima: LayerConfig,
     pub media: LayerConfig,
     pub adventitia: LayerConfig,
@@ -145,6 +161,7 @@ impl Default for WallConfig {
         WallConfig {
             thickness_ratio: 0.2,
             thickness_mm: None,
+            growth: WallGrowth::Normal,
             intima: LayerConfig { fraction: 0.27, elements: 1, fibre_angle_deg: 29.0 },
             media: LayerConfig { fraction: 0.36, elements: 1, fibre_angle_deg: 29.0 },
             adventitia: LayerConfig { fraction: 0.37, elements: 1, fibre_angle_deg: 62.0 },

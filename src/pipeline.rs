@@ -130,7 +130,7 @@ pub fn mesh_vessel(
     let levels = RadialLevels::new(graded_levels(l.radial_elements, ratio), &layers);
     let w = &config.wall;
     let thickness = |r: f64| w.thickness_mm.unwrap_or(w.thickness_ratio * r);
-    let mut mesh = build_volume(&projected, &template, &levels, &layers, &thickness);
+    let mut mesh = build_volume(&projected, &template, &levels, &layers, &thickness, w.growth);
 
     progress.stage("annotation");
     annotate(&mut mesh);

@@ -7,13 +7,14 @@
 //! ordered lumen, intima, media, adventitia, each station interval by station interval.
 
 use crate::blocks::SectionTemplate;
+use crate::config::WallGrowth;
 use crate::mesh::{
     sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, WallLayer, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER,
     FACE_UPSTREAM,
 };
 use crate::projection::ProjectedBranch;
 use indexmap::IndexMap;
-use nalgebra::{Point3, Vector3};
+use nalgebra::Vector3;
 
 /// Radial structure shared by all stations.
 #[derive(Debug, Clone)]
@@ -102,6 +103,7 @@ pub fn build_volume(
     levels: &RadialLevels,
     layers: &[WallLayer],
     wall_thickness: &dyn Fn(f64) -> f64,
+    wall_growth: WallGrowth,
 ) -> VesselMesh {
     let grid = Grid { t: template, lumen_cells: levels.lumen_cells(), wall_cells: levels.wall_cells() };
     let stations = projected.sections.len();
@@ -121,13 +123,24 @@ pub fn build_volume(
                 nodes.push(if rho == 1.0 { b } else { a + (b - a) * rho });
             }
         }
+    }
+    // Wall nodes come after all lumen nodes of their station: insert them station by station.
+    let growth: Vec<Vec<Vector3<f64>>> = match wall_growth {
+        WallGrowth::Ray => projected.sections.iter().map(|s| s.dirs.clone()).collect(),
+        WallGrowth::Normal => surface_normals(projected),
+    };
+    let lumen_per_station = grid.core_count() + m * r_cells;
+    let mut with_wall = Vec::with_capacity(stations * grid.per_station());
+    for (i, sec) in projected.sections.iter().enumerate() {
+        with_wall.extend_from_slice(&nodes[i * lumen_per_station..(i + 1) * lumen_per_station]);
         let thickness = wall_thickness(sec.station.radius);
         for &tau in &levels.wall[1..] {
             for k in 0..m {
-                nodes.push(sec.surface[k] + sec.dirs[k] * (thickness * tau));
+                with_wall.push(sec.surface[k] + growth[i][k] * (thickness * tau));
             }
         }
     }
+    let nodes = with_wall;
 
     // Elements: lumen (core + lateral), then each wall region.
     let mut hexes: Vec<Hex> = Vec::new();
@@ -264,7 +277,51 @@ fn sorted<T: Ord>(mut v: Vec<T>) -> Vec<T> {
     v
 }
 
-/// Unit vector helper used by annotation: the direction from a to b.
-pub fn direction(a: &Point3<f64>, b: &Point3<f64>) -> Vector3<f64> {
-    (b - a).normalize()
+/// Passes of neighbour averaging of the wall directions: enough to calm the voxel ripples of
+/// segmented surfaces, few enough to keep the shape.
+const NORMAL_SMOOTHING_PASSES: usize = 3;
+
+/// Outward unit normals of the meshed lumen surface at its nodes, per station and ring point:
+/// the average of the adjacent quads' normals, smoothed over the structured grid. At the end
+/// stations the axial component is removed so the wall's end rings stay in the end planes.
+fn surface_normals(projected: &ProjectedBranch) -> Vec<Vec<Vector3<f64>>> {
+    let secs = &projected.sections;
+    let (n, m) = (secs.len(), secs[0].surface.len());
+    let s = |i: usize, k: usize| secs[i].surface[k % m];
+    let mut normals = vec![vec![Vector3::zeros(); m]; n];
+    for i in 0..n - 1 {
+        for k in 0..m {
+            // circumferential x axial = outward (the ring runs counter-clockwise about the tangent)
+            let a = (s(i, k + 1) - s(i, k)) + (s(i + 1, k + 1) - s(i + 1, k));
+            let b = (s(i + 1, k) - s(i, k)) + (s(i + 1, k + 1) - s(i, k + 1));
+            let q = a.cross(&b);
+            for (ii, kk) in [(i, k), (i, k + 1), (i + 1, k), (i + 1, k + 1)] {
+                normals[ii][kk % m] += q;
+            }
+        }
+    }
+    let unit = |v: Vector3<f64>, fallback: Vector3<f64>| if v.norm() > 0.0 { v.normalize() } else { fallback };
+    for (i, row) in normals.iter_mut().enumerate() {
+        for (k, v) in row.iter_mut().enumerate() {
+            *v = unit(*v, secs[i].dirs[k]);
+        }
+    }
+    for _ in 0..NORMAL_SMOOTHING_PASSES {
+        let prev = normals.clone();
+        for i in 0..n {
+            for k in 0..m {
+                let mut sum = prev[i][k] * 2.0 + prev[i][(k + 1) % m] + prev[i][(k + m - 1) % m];
+                sum += prev[i.saturating_sub(1)][k] + prev[(i + 1).min(n - 1)][k];
+                normals[i][k] = unit(sum, prev[i][k]);
+            }
+        }
+    }
+    for i in [0, n - 1] {
+        let t = secs[i].station.frame.tangent;
+        for k in 0..m {
+            let v = normals[i][k];
+            normals[i][k] = unit(v - t * v.dot(&t), secs[i].dirs[k]);
+        }
+    }
+    normals
 }
