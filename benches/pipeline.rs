@@ -85,7 +85,7 @@ fn main() {
     let fine = MeshConfig::preset(Preset::Fine);
     let mut big = MeshConfig::preset(Preset::Fine);
     // helical at the fine preset with a shorter axial step: about 800,000 hexes
-    big.lumen.axial_spacing_mm = Some(0.0635);
+    big.lumen.axial_spacing_mm = Some(0.0569);
     let cases: [(&str, &str, &MeshConfig); 3] =
         [("fine preset", "aaa", &fine), ("fine preset", "helical", &fine), ("800k hexes", "helical", &big)];
     for (label, name, config) in cases {

@@ -134,7 +134,7 @@ pub fn mesh_vessel(
 
     progress.stage("annotation");
     annotate(&mut mesh);
-    if let Some((e, q)) = mesh.quality.iter().enumerate().find(|(_, q)| !(q.scaled_jacobian > 0.0)) {
+    if let Some((e, q)) = mesh.quality.iter().enumerate().find(|(_, q)| q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0) {
         let c = crate::mesh::face_centre(&mesh.corners(e), 0);
         return Err(Error::Geometry(format!(
             "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm is inverted (scaled Jacobian {:.3}): the vessel bends \

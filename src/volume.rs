@@ -110,37 +110,29 @@ pub fn build_volume(
     let m = template.ring_len();
     let r_cells = grid.lumen_cells;
 
-    // Nodes, station by station.
-    let mut nodes = Vec::with_capacity(stations * grid.per_station());
-    for sec in &projected.sections {
-        for c in &template.core {
-            nodes.push(template.place(&sec.station, c));
-        }
-        for &rho in &levels.lumen[1..] {
-            for k in 0..m {
-                let (a, b) = (sec.origins[k], sec.surface[k]);
-                // The surface level is the hit point itself, bit for bit.
-                nodes.push(if rho == 1.0 { b } else { a + (b - a) * rho });
-            }
-        }
-    }
-    // Wall nodes come after all lumen nodes of their station: insert them station by station.
+    // Nodes, station by station: core, lumen rings, then the wall grown from the surface nodes.
     let growth: Vec<Vec<Vector3<f64>>> = match wall_growth {
         WallGrowth::Ray => projected.sections.iter().map(|s| s.dirs.clone()).collect(),
         WallGrowth::Normal => surface_normals(projected),
     };
-    let lumen_per_station = grid.core_count() + m * r_cells;
-    let mut with_wall = Vec::with_capacity(stations * grid.per_station());
-    for (i, sec) in projected.sections.iter().enumerate() {
-        with_wall.extend_from_slice(&nodes[i * lumen_per_station..(i + 1) * lumen_per_station]);
+    let mut nodes = Vec::with_capacity(stations * grid.per_station());
+    for (sec, dirs) in projected.sections.iter().zip(&growth) {
+        for c in &template.core {
+            nodes.push(template.place(&sec.station, c));
+        }
+        for &rho in &levels.lumen[1..] {
+            for (a, b) in sec.origins.iter().zip(&sec.surface) {
+                // The surface level is the hit point itself, bit for bit.
+                nodes.push(if rho == 1.0 { *b } else { a + (b - a) * rho });
+            }
+        }
         let thickness = wall_thickness(sec.station.radius);
         for &tau in &levels.wall[1..] {
-            for k in 0..m {
-                with_wall.push(sec.surface[k] + growth[i][k] * (thickness * tau));
+            for (b, d) in sec.surface.iter().zip(dirs) {
+                nodes.push(b + d * (thickness * tau));
             }
         }
     }
-    let nodes = with_wall;
 
     // Elements: lumen (core + lateral), then each wall region.
     let mut hexes: Vec<Hex> = Vec::new();
@@ -318,9 +310,8 @@ fn surface_normals(projected: &ProjectedBranch) -> Vec<Vec<Vector3<f64>>> {
     }
     for i in [0, n - 1] {
         let t = secs[i].station.frame.tangent;
-        for k in 0..m {
-            let v = normals[i][k];
-            normals[i][k] = unit(v - t * v.dot(&t), secs[i].dirs[k]);
+        for (v, d) in normals[i].iter_mut().zip(&secs[i].dirs) {
+            *v = unit(*v - t * v.dot(&t), *d);
         }
     }
     normals
