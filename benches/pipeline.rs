@@ -4,35 +4,14 @@
 //! throughput. Timings are measured once per case (the stages are deterministic and long enough
 //! for one run to be representative), on the threads rayon gives (all cores by default).
 
-use indexmap::IndexMap;
 use std::time::Instant;
 use vesselhex::config::{MeshConfig, Preset};
-use vesselhex::input::{CenterlinePolyline, Centerlines, TriangleSurface};
 use vesselhex::pipeline::mesh_vessel;
 use vesselhex::progress::Progress;
-use vesselhex::synthetic::{centerline_abscissae, fixture_by_name, triangulate};
 use vesselhex::writers::{WriteOptions, WRITERS};
 
-fn inputs(name: &str) -> (TriangleSurface, Centerlines) {
-    let v = fixture_by_name(name).expect("fixture");
-    let res = v.resolution();
-    let (vertices, triangles) = triangulate(v.as_ref(), res.circumferential, res.axial_step_mm);
-    let surface = TriangleSurface { vertices, triangles, triangle_tags: None, source: name.into() };
-    let s = centerline_abscissae(v.as_ref());
-    let cl = Centerlines {
-        polylines: vec![CenterlinePolyline {
-            points: s.iter().map(|&s| v.point(s)).collect(),
-            radii: Some(s.iter().map(|&s| v.radius(s)).collect()),
-            normals: None,
-            cell_tags: IndexMap::new(),
-        }],
-        source: format!("{name} centerline").into(),
-    };
-    (surface, cl)
-}
-
 fn run(label: &str, name: &str, config: &MeshConfig) {
-    let (surface, cl) = inputs(name);
+    let (surface, cl) = vesselhex::testing::fixture_inputs(name).expect("fixture");
     let mut progress = Progress::new(true, 9);
     let t0 = Instant::now();
     let meshed = mesh_vessel(&surface, &cl, config, &mut progress).expect("mesh");

@@ -54,16 +54,7 @@ mod tests {
 
     #[test]
     fn triad_of_a_unit_cube_and_fibres_at_beta() {
-        let c = [
-            Point3::new(0.0, 0.0, 0.0),
-            Point3::new(1.0, 0.0, 0.0),
-            Point3::new(1.0, 1.0, 0.0),
-            Point3::new(0.0, 1.0, 0.0),
-            Point3::new(0.0, 0.0, 1.0),
-            Point3::new(1.0, 0.0, 1.0),
-            Point3::new(1.0, 1.0, 1.0),
-            Point3::new(0.0, 1.0, 1.0),
-        ];
+        let c = crate::mesh::unit_cube();
         let t = element_triad(&c);
         assert!((t.e_rad - Vector3::x()).norm() < 1e-12);
         assert!((t.e_long - Vector3::z()).norm() < 1e-12);

@@ -257,6 +257,14 @@ impl VesselMesh {
     }
 }
 
+/// The unit cube [0,1]^3 in canonical order: the reference element of the face and corner tables.
+pub fn unit_cube() -> [Point3<f64>; 8] {
+    std::array::from_fn(|i| {
+        let (x, y) = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)][i % 4];
+        Point3::new(x, y, (i / 4) as f64)
+    })
+}
+
 /// Centre of face `f` of an element given its corners.
 pub fn face_centre(corners: &[Point3<f64>; 8], f: usize) -> Point3<f64> {
     let t = HEX_FACES[f];
@@ -273,19 +281,6 @@ pub fn quad_area_vector(p: [Point3<f64>; 4]) -> Vector3<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn unit_cube() -> [Point3<f64>; 8] {
-        [
-            Point3::new(0.0, 0.0, 0.0),
-            Point3::new(1.0, 0.0, 0.0),
-            Point3::new(1.0, 1.0, 0.0),
-            Point3::new(0.0, 1.0, 0.0),
-            Point3::new(0.0, 0.0, 1.0),
-            Point3::new(1.0, 0.0, 1.0),
-            Point3::new(1.0, 1.0, 1.0),
-            Point3::new(0.0, 1.0, 1.0),
-        ]
-    }
 
     #[test]
     fn faces_point_outward_on_unit_cube() {

@@ -85,22 +85,9 @@ impl Stats {
 mod tests {
     use super::*;
 
-    fn cube() -> [Point3<f64>; 8] {
-        [
-            Point3::new(0.0, 0.0, 0.0),
-            Point3::new(1.0, 0.0, 0.0),
-            Point3::new(1.0, 1.0, 0.0),
-            Point3::new(0.0, 1.0, 0.0),
-            Point3::new(0.0, 0.0, 1.0),
-            Point3::new(1.0, 0.0, 1.0),
-            Point3::new(1.0, 1.0, 1.0),
-            Point3::new(0.0, 1.0, 1.0),
-        ]
-    }
-
     #[test]
     fn cube_is_perfect_and_scaling_does_not_matter() {
-        let mut c = cube();
+        let mut c = crate::mesh::unit_cube();
         assert!((scaled_jacobian(&c) - 1.0).abs() < 1e-12);
         assert!(equiangle_skew(&c).abs() < 1e-12);
         for p in c.iter_mut() {
@@ -113,7 +100,7 @@ mod tests {
 
     #[test]
     fn sheared_and_inverted_elements() {
-        let mut c = cube();
+        let mut c = crate::mesh::unit_cube();
         // shear the top by 45 degrees in x: corner angles 45/135
         for p in c[4..].iter_mut() {
             p.x += 1.0;
@@ -122,7 +109,7 @@ mod tests {
         assert!((sj - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12, "{sj}");
         assert!((equiangle_skew(&c) - 0.5).abs() < 1e-12);
         // mirror: inverted
-        let mut m = cube();
+        let mut m = crate::mesh::unit_cube();
         for p in m.iter_mut() {
             p.z = -p.z;
         }

@@ -53,3 +53,24 @@ pub fn straight_tube_mesh(config: &MeshConfig) -> Result<Meshed> {
     let centerlines = straight_tube_centerline(2.0, 30.0);
     mesh_vessel(&surface, &centerlines, config, &mut Progress::new(true, 9))
 }
+
+/// A synthetic fixture as in-memory inputs: its exact triangulation (at the fixture's
+/// resolution) and its exact centerline, without going through files.
+pub fn fixture_inputs(name: &str) -> Option<(TriangleSurface, Centerlines)> {
+    use crate::synthetic::{centerline_abscissae, fixture_by_name, triangulate};
+    let v = fixture_by_name(name)?;
+    let res = v.resolution();
+    let (vertices, triangles) = triangulate(v.as_ref(), res.circumferential, res.axial_step_mm);
+    let surface = TriangleSurface { vertices, triangles, triangle_tags: None, source: format!("{name} (in memory)").into() };
+    let s = centerline_abscissae(v.as_ref());
+    let centerlines = Centerlines {
+        polylines: vec![CenterlinePolyline {
+            points: s.iter().map(|&s| v.point(s)).collect(),
+            radii: Some(s.iter().map(|&s| v.radius(s)).collect()),
+            normals: None,
+            cell_tags: IndexMap::new(),
+        }],
+        source: format!("{name} centerline (in memory)").into(),
+    };
+    Some((surface, centerlines))
+}
