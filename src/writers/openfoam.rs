@@ -15,7 +15,7 @@
 //!   (the end rings of the wall) and `wall_outer` (the adventitial surface), all type `patch`;
 //!   cellZones `lumen`, `intima`, `media`, `adventitia` and the faceZone `lumen_wall` of the
 //!   internal lumen-wall interface faces (flipMap 0: normals point from the lumen into the wall).
-//!   `constant/fluidSolidZones` holds the cellZones `fluid` and `solid` for
+//!   `constant/polyMesh/fluidSolidZones` holds the cellZones `fluid` and `solid` for
 //!   `splitMeshRegions -cellZonesFileOnly fluidSolidZones` (two regions, interface patches
 //!   `fluid_to_solid` / `solid_to_fluid`); `splitMeshRegions -cellZones` gives one region per layer.
 //!
@@ -785,7 +785,7 @@ pub fn write_case(poly: &PolyMesh, options: &WriteOptions, case: &Path) -> Resul
 }
 
 /// Writes lumen + wall in one polyMesh into `dir/openfoam-fsi/`, with the system files that
-/// OpenFOAM utilities need, `constant/fluidSolidZones` and an `Allrun` that splits the regions.
+/// OpenFOAM utilities need, `constant/polyMesh/fluidSolidZones` and an `Allrun` that splits the regions.
 pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
     let poly = fsi_polymesh(mesh)?;
     let case = dir.join("openfoam-fsi");
@@ -801,9 +801,10 @@ pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path)
         ("fluid".to_string(), (0..n_lumen).collect::<Vec<u32>>()),
         ("solid".to_string(), (n_lumen..poly.n_cells as u32).collect()),
     ];
-    let path = case.join("constant/fluidSolidZones");
-    write_atomic(&path, |w| write_cell_zones(w, "constant", "fluidSolidZones", &zones))?;
-    out.push(PathBuf::from("constant/fluidSolidZones"));
+    // splitMeshRegions -cellZonesFileOnly reads the file from constant/polyMesh.
+    let path = case.join("constant/polyMesh/fluidSolidZones");
+    write_atomic(&path, |w| write_cell_zones(w, "constant/polyMesh", "fluidSolidZones", &zones))?;
+    out.push(PathBuf::from("constant/polyMesh/fluidSolidZones"));
     Ok(prefixed("openfoam-fsi", out))
 }
 
