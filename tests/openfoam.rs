@@ -199,6 +199,9 @@ fn fsi_mesh_passes_checkmesh_and_splits_into_fluid_and_solid_regions() {
     assert_eq!(stat(&s, "cell zones"), 4);
     assert_eq!(stat(&s, "face zones"), 1);
     eprintln!("fsi: checkMesh Mesh OK; {}", s.join("; "));
+    let binary = write(&mesh, "openfoam-fsi", &WriteOptions { foam_binary: true, ..Default::default() }, &dir.join("binary"));
+    assert_eq!(read_polymesh(&binary).unwrap(), poly);
+    assert_eq!(check_mesh(&binary, &[]), s, "fsi: ASCII and binary give different checkMesh summaries");
     let interface = mesh.face_sets[vesselhex::mesh::sets::LUMEN_WALL_FACES].len();
 
     // Fluid and solid: the cellZones of constant/fluidSolidZones.
@@ -378,4 +381,162 @@ fn poiseuille_pressure_drop_and_flow_balance() {
     assert!(error_fit.abs() < 0.03, "developed pressure gradient off by {:.2} %", 100.0 * error_fit);
     assert!(balance < 1e-6, "inflow {q_in} vs outflow {q_out}");
     cleanup(&dir);
+}
+
+/// A 60 degree bend: tube radius 2 mm bent on a 30 mm radius in the x-z plane, with its centerline.
+fn bent_tube(config: &MeshConfig) -> VesselMesh {
+    use nalgebra::{Point3, Vector3};
+    use vesselhex::input::{CenterlinePolyline, Centerlines, TriangleSurface};
+    let (r, bend, angle) = (2.0, 30.0, std::f64::consts::FRAC_PI_3);
+    let frame = |theta: f64| {
+        let p = Point3::new(bend * (1.0 - theta.cos()), 0.0, bend * theta.sin());
+        (p, Vector3::new(theta.cos(), 0.0, -theta.sin()), Vector3::y())
+    };
+    let (around, rings) = (96, 160);
+    let mut vertices = Vec::new();
+    for j in 0..=rings {
+        let (p, n, b) = frame(angle * j as f64 / rings as f64);
+        for i in 0..around {
+            let a = std::f64::consts::TAU * i as f64 / around as f64;
+            vertices.push(p + (n * a.cos() + b * a.sin()) * r);
+        }
+    }
+    let mut triangles = Vec::new();
+    for j in 0..rings {
+        for i in 0..around {
+            let a = (j * around + i) as u32;
+            let b = (j * around + (i + 1) % around) as u32;
+            let (c, d) = (a + around as u32, b + around as u32);
+            triangles.push([a, b, d]);
+            triangles.push([a, d, c]);
+        }
+    }
+    let surface = TriangleSurface { vertices, triangles, triangle_tags: None, source: "bent tube (in memory)".into() };
+    let points: Vec<Point3<f64>> = (0..=90).map(|i| frame(angle * i as f64 / 90.0).0).collect();
+    let centerlines = Centerlines {
+        polylines: vec![CenterlinePolyline { radii: Some(vec![r; points.len()]), points, normals: None, cell_tags: Default::default() }],
+        source: "bent tube centerline (in memory)".into(),
+    };
+    let mut progress = vesselhex::progress::Progress::new(true, 9);
+    vesselhex::pipeline::mesh_vessel(&surface, &centerlines, config, &mut progress).unwrap().mesh
+}
+
+/// Runs a written case's Allrun; returns the solver log and the run time.
+fn allrun(case: &Path, solver: &str) -> (String, f64) {
+    let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
+    let started = std::time::Instant::now();
+    let out = Command::new("sh").arg(case.join("Allrun")).env("WM_PROJECT_DIR", wm).env("OMP_NUM_THREADS", "1").output().unwrap();
+    let seconds = started.elapsed().as_secs_f64();
+    let log = std::fs::read_to_string(case.join(format!("log.{solver}"))).unwrap_or_default();
+    assert!(
+        out.status.success(),
+        "Allrun failed: {}{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+        &log[log.len().saturating_sub(3000)..]
+    );
+    (log, seconds)
+}
+
+/// Relative difference of the fluxes through the inlet and all outlets at the latest time.
+fn flow_imbalance(case: &Path, poly: &PolyMesh) -> f64 {
+    let phi = latest_time(case).join("phi");
+    let sum = |name: &str| read_scalar_field(&phi, poly.n_cells, Some((name, poly.patch(name).unwrap().size))).iter().sum::<f64>();
+    let q_in = -sum("inlet");
+    let q_out: f64 = poly.patches.iter().filter(|p| p.name.starts_with("outlet")).map(|p| sum(&p.name)).sum();
+    (q_in - q_out).abs() / q_in
+}
+
+#[test]
+fn bent_tube_passes_checkmesh_and_its_case_converges() {
+    if !openfoam_available("bent_tube_passes_checkmesh_and_its_case_converges") {
+        return;
+    }
+    let mesh = bent_tube(&MeshConfig::preset(Preset::Coarse));
+    check_ascii_and_binary(&mesh, "bent-tube");
+    let dir = scratch("bent-run");
+    let case = write(&mesh, "openfoam", &WriteOptions::default(), &dir);
+    let poly = read_polymesh(&case).unwrap();
+    let (log, seconds) = allrun(&case, "simpleFoam");
+    let converged = log.lines().find(|l| l.contains("solution converged in"));
+    assert!(converged.is_some(), "simpleFoam did not converge on the bent tube:\n{}", &log[log.len().saturating_sub(3000)..]);
+    let imbalance = flow_imbalance(&case, &poly);
+    eprintln!("bent tube: {} cells; {}; flow imbalance {imbalance:.2e}; Allrun {seconds:.1} s", poly.n_cells, converged.unwrap().trim());
+    assert!(imbalance < 1e-6);
+    cleanup(&dir);
+}
+
+#[test]
+fn pimplefoam_case_runs() {
+    if !openfoam_available("pimplefoam_case_runs") {
+        return;
+    }
+    let mesh = tube(&MeshConfig::preset(Preset::Coarse));
+    let dir = scratch("pimple");
+    let mut options = WriteOptions::default();
+    options.openfoam.solver = vesselhex::config::FoamSolver::PimpleFoam;
+    options.openfoam.end_time = Some(0.05);
+    let case = write(&mesh, "openfoam", &options, &dir);
+    let poly = read_polymesh(&case).unwrap();
+    let (log, seconds) = allrun(&case, "pimpleFoam");
+    assert!(log.lines().any(|l| l.trim() == "End"), "{}", &log[log.len().saturating_sub(3000)..]);
+    let steps = log.lines().filter(|l| l.starts_with("Time = ")).count();
+    let imbalance = flow_imbalance(&case, &poly);
+    eprintln!("pimpleFoam: {steps} steps to 0.05 s in {seconds:.1} s; flow imbalance {imbalance:.2e}");
+    assert!(imbalance < 1e-6);
+    cleanup(&dir);
+}
+
+/// The command line end to end: STL + CSV centerline in, `--formats openfoam,openfoam-fsi
+/// --foam-format binary` out. Needs the input readers, which are not on this branch (merged on
+/// main): run with `--ignored` after the merge.
+#[test]
+#[ignore = "needs the STL/CSV input readers (on main): run with --ignored after the merge"]
+fn command_line_writes_binary_cases() {
+    use std::fmt::Write as _;
+    let dir = scratch("cli");
+    let surface = vesselhex::testing::straight_tube_surface(2.0, 30.0, 96, 120);
+    let mut stl = String::from("solid tube\n");
+    for t in &surface.triangles {
+        let p = t.map(|i| surface.vertices[i as usize]);
+        let n = (p[1] - p[0]).cross(&(p[2] - p[0])).normalize();
+        writeln!(stl, "facet normal {} {} {}\nouter loop", n.x, n.y, n.z).unwrap();
+        for v in p {
+            writeln!(stl, "vertex {} {} {}", v.x, v.y, v.z).unwrap();
+        }
+        stl.push_str("endloop\nendfacet\n");
+    }
+    stl.push_str("endsolid tube\n");
+    std::fs::write(dir.join("tube.stl"), stl).unwrap();
+    let csv: String = std::iter::once("x,y,z,r".to_string()).chain((0..=60).map(|i| format!("0,0,{},2", 0.5 * i as f64))).collect::<Vec<_>>().join("\n");
+    std::fs::write(dir.join("tube.csv"), csv).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_vesselhex"))
+        .args(["mesh", "--quiet", "--surface", "tube.stl", "--centerlines", "tube.csv", "--output", "out"])
+        .args(["--formats", "openfoam,openfoam-fsi", "--foam-format", "binary"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for case in ["openfoam", "openfoam-fsi"] {
+        let points = std::fs::read(dir.join("out").join(case).join("constant/polyMesh/points")).unwrap();
+        assert!(points.windows(13).any(|w| w == b"format      b"), "{case}: not binary");
+        assert_rules(&read_polymesh(&dir.join("out").join(case)).unwrap(), case);
+    }
+    assert!(dir.join("out/openfoam/Allrun").exists() && dir.join("out/openfoam/0/U").exists());
+    if openfoam_available("command_line_writes_binary_cases") {
+        check_mesh(&dir.join("out/openfoam"), &[]);
+        check_mesh(&dir.join("out/openfoam-fsi"), &[]);
+    }
+    cleanup(&dir);
+}
+
+#[test]
+fn foam_format_flag_is_parsed() {
+    let bin = env!("CARGO_BIN_EXE_vesselhex");
+    let help = Command::new(bin).args(["mesh", "--help"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&help.stdout).contains("--foam-format"));
+    let bad = Command::new(bin).args(["mesh", "--surface", "x.stl", "--output", "o", "--foam-format", "hdf5"]).output().unwrap();
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("ascii") && err.contains("binary"), "{err}");
 }
