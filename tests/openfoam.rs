@@ -81,12 +81,17 @@ fn check_mesh(case: &Path, extra: &[&str]) -> Vec<String> {
     let _ = std::fs::remove_dir_all(&copy);
     let failed: Vec<&str> = log.lines().filter(|l| l.trim_start().starts_with("***")).collect();
     assert!(failed.is_empty(), "checkMesh on {}: {failed:?}\n{log}", case.display());
-    assert!(log.lines().any(|l| l.trim() == "Mesh OK."), "checkMesh on {} did not say Mesh OK.:\n{log}", case.display());
+    assert!(
+        log.lines().any(|l| l.trim() == "Mesh OK."),
+        "checkMesh on {} did not say Mesh OK.:\n{log}",
+        case.display()
+    );
     let mut summary = Vec::new();
     let mut section = "";
     for line in log.lines() {
         let t = line.trim();
-        if t.starts_with("Mesh stats") || t.starts_with("Checking patch topology") || t.starts_with("Checking geometry") {
+        if t.starts_with("Mesh stats") || t.starts_with("Checking patch topology") || t.starts_with("Checking geometry")
+        {
             section = t;
             continue;
         }
@@ -136,7 +141,10 @@ fn check_ascii_and_binary(mesh: &VesselMesh, name: &str) {
         assert_rules(&poly, name);
         let expected = openfoam::lumen_polymesh(mesh).unwrap();
         assert_eq!(poly.points, expected.points, "{name}: points do not read back bit for bit");
-        assert_eq!((poly.faces.len(), poly.n_internal(), poly.n_cells), (expected.faces.len(), expected.n_internal(), expected.n_cells));
+        assert_eq!(
+            (poly.faces.len(), poly.n_internal(), poly.n_cells),
+            (expected.faces.len(), expected.n_internal(), expected.n_cells)
+        );
         let s = check_mesh(&case, &[]);
         assert_eq!(stat(&s, "cells"), poly.n_cells, "{s:?}");
         assert_eq!(stat(&s, "hexahedra"), poly.n_cells, "{s:?}");
@@ -144,7 +152,10 @@ fn check_ascii_and_binary(mesh: &VesselMesh, name: &str) {
         assert_eq!(stat(&s, "internal faces"), poly.n_internal(), "{s:?}");
         assert_eq!(stat(&s, "points"), poly.points.len(), "{s:?}");
         for p in &poly.patches {
-            let row = s.iter().find(|l| l.split(' ').next() == Some(p.name.as_str())).unwrap_or_else(|| panic!("no patch {} in {s:?}", p.name));
+            let row = s
+                .iter()
+                .find(|l| l.split(' ').next() == Some(p.name.as_str()))
+                .unwrap_or_else(|| panic!("no patch {} in {s:?}", p.name));
             assert_eq!(row.split(' ').nth(1), Some(p.size.to_string().as_str()), "{row}");
         }
         eprintln!("{name} {}: checkMesh Mesh OK; {}", if binary { "binary" } else { "ascii" }, s.join("; "));
@@ -178,7 +189,9 @@ fn boundary_text(case: &Path, region: &str) -> String {
 fn patch_entry(boundary: &str, name: &str) -> Option<(usize, String)> {
     let start = boundary.lines().position(|l| l.trim() == name)?;
     let lines: Vec<&str> = boundary.lines().skip(start).take_while(|l| l.trim() != "}").collect();
-    let get = |key: &str| lines.iter().find_map(|l| l.trim().strip_prefix(key)).map(|v| v.trim().trim_end_matches(';').to_string());
+    let get = |key: &str| {
+        lines.iter().find_map(|l| l.trim().strip_prefix(key)).map(|v| v.trim().trim_end_matches(';').to_string())
+    };
     Some((get("nFaces")?.parse().ok()?, get("type")?))
 }
 
@@ -199,7 +212,8 @@ fn fsi_mesh_passes_checkmesh_and_splits_into_fluid_and_solid_regions() {
     assert_eq!(stat(&s, "cell zones"), 4);
     assert_eq!(stat(&s, "face zones"), 1);
     eprintln!("fsi: checkMesh Mesh OK; {}", s.join("; "));
-    let binary = write(&mesh, "openfoam-fsi", &WriteOptions { foam_binary: true, ..Default::default() }, &dir.join("binary"));
+    let binary =
+        write(&mesh, "openfoam-fsi", &WriteOptions { foam_binary: true, ..Default::default() }, &dir.join("binary"));
     assert_eq!(read_polymesh(&binary).unwrap(), poly);
     assert_eq!(check_mesh(&binary, &[]), s, "fsi: ASCII and binary give different checkMesh summaries");
     let interface = mesh.face_sets[vesselhex::mesh::sets::LUMEN_WALL_FACES].len();
@@ -210,21 +224,26 @@ fn fsi_mesh_passes_checkmesh_and_splits_into_fluid_and_solid_regions() {
     let log = foam("splitMeshRegions", &["-cellZonesFileOnly", "fluidSolidZones", "-overwrite"], &two);
     for (region, other) in [("fluid", "solid"), ("solid", "fluid")] {
         let b = boundary_text(&two, region);
-        let (n, kind) = patch_entry(&b, &format!("{region}_to_{other}")).unwrap_or_else(|| panic!("{region}: no interface patch\n{b}\n{log}"));
+        let (n, kind) = patch_entry(&b, &format!("{region}_to_{other}"))
+            .unwrap_or_else(|| panic!("{region}: no interface patch\n{b}\n{log}"));
         assert_eq!((n, kind.as_str()), (interface, "mappedWall"), "{region}");
         assert!(b.contains(&format!("sampleRegion    {other};")), "{b}");
         let s = check_mesh(&two, &["-region", region]);
         eprintln!("fsi {region} region: checkMesh Mesh OK; {}", s.join("; "));
     }
     assert_eq!(patch_entry(&boundary_text(&two, "fluid"), "inlet").unwrap().0, poly.patch("inlet").unwrap().size);
-    assert_eq!(patch_entry(&boundary_text(&two, "solid"), "wall_outer").unwrap().0, poly.patch("wall_outer").unwrap().size);
+    assert_eq!(
+        patch_entry(&boundary_text(&two, "solid"), "wall_outer").unwrap().0,
+        poly.patch("wall_outer").unwrap().size
+    );
 
     // One region per layer: splitMeshRegions -cellZones.
     let four = dir.join("layers");
     copy_dir(&case, &four);
     let log = foam("splitMeshRegions", &["-cellZones", "-overwrite"], &four);
     let lumen = boundary_text(&four, "lumen");
-    let (n, kind) = patch_entry(&lumen, "lumen_to_intima").unwrap_or_else(|| panic!("no lumen_to_intima\n{lumen}\n{log}"));
+    let (n, kind) =
+        patch_entry(&lumen, "lumen_to_intima").unwrap_or_else(|| panic!("no lumen_to_intima\n{lumen}\n{log}"));
     assert_eq!((n, kind.as_str()), (interface, "mappedWall"));
     assert!(patch_entry(&boundary_text(&four, "media"), "media_to_adventitia").is_some());
     cleanup(&dir);
@@ -272,7 +291,8 @@ fn read_scalar_field(path: &Path, n_cells: usize, patch: Option<(&str, usize)>) 
         }
         Some((name, n)) => {
             let b = t.iter().position(|x| x == "boundaryField").unwrap();
-            let p = b + t[b..].iter().position(|x| x == name).unwrap_or_else(|| panic!("no {name} in {}", path.display()));
+            let p =
+                b + t[b..].iter().position(|x| x == name).unwrap_or_else(|| panic!("no {name} in {}", path.display()));
             let v = p + t[p..].iter().position(|x| x == "value").unwrap();
             scalar_values(&t, v + 1, n)
         }
@@ -322,10 +342,20 @@ fn poiseuille_pressure_drop_and_flow_balance() {
 
     let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
     let started = std::time::Instant::now();
-    let out = Command::new("sh").arg(case.join("Allrun")).env("WM_PROJECT_DIR", wm).env("OMP_NUM_THREADS", "1").output().unwrap();
+    let out = Command::new("sh")
+        .arg(case.join("Allrun"))
+        .env("WM_PROJECT_DIR", wm)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .unwrap();
     let seconds = started.elapsed().as_secs_f64();
     let log = std::fs::read_to_string(case.join("log.simpleFoam")).unwrap_or_default();
-    assert!(out.status.success(), "Allrun failed: {}{}\n{log}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "Allrun failed: {}{}\n{log}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
     let converged = log.lines().find(|l| l.contains("solution converged in"));
     assert!(converged.is_some(), "simpleFoam did not converge:\n{}", &log[log.len().saturating_sub(3000)..]);
     let time = latest_time(&case);
@@ -360,7 +390,8 @@ fn poiseuille_pressure_drop_and_flow_balance() {
         .collect();
     let n = mid.len() as f64;
     let (mz, mp) = (mid.iter().map(|x| x.0).sum::<f64>() / n, mid.iter().map(|x| x.1).sum::<f64>() / n);
-    let slope = mid.iter().map(|(z, p)| (z - mz) * (p - mp)).sum::<f64>() / mid.iter().map(|(z, _)| (z - mz).powi(2)).sum::<f64>();
+    let slope = mid.iter().map(|(z, p)| (z - mz) * (p - mp)).sum::<f64>()
+        / mid.iter().map(|(z, _)| (z - mz).powi(2)).sum::<f64>();
     let drop_fit = -slope * length;
     let error_fit = (drop_fit - hp(length)) / hp(length);
     let nominal = 8.0 * of.nu * length * q / (std::f64::consts::PI * 0.002f64.powi(4));
@@ -414,7 +445,12 @@ fn bent_tube(config: &MeshConfig) -> VesselMesh {
     let surface = TriangleSurface { vertices, triangles, triangle_tags: None, source: "bent tube (in memory)".into() };
     let points: Vec<Point3<f64>> = (0..=90).map(|i| frame(angle * i as f64 / 90.0).0).collect();
     let centerlines = Centerlines {
-        polylines: vec![CenterlinePolyline { radii: Some(vec![r; points.len()]), points, normals: None, cell_tags: Default::default() }],
+        polylines: vec![CenterlinePolyline {
+            radii: Some(vec![r; points.len()]),
+            points,
+            normals: None,
+            cell_tags: Default::default(),
+        }],
         source: "bent tube centerline (in memory)".into(),
     };
     let mut progress = vesselhex::progress::Progress::new(true, 9);
@@ -425,7 +461,12 @@ fn bent_tube(config: &MeshConfig) -> VesselMesh {
 fn allrun(case: &Path, solver: &str) -> (String, f64) {
     let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
     let started = std::time::Instant::now();
-    let out = Command::new("sh").arg(case.join("Allrun")).env("WM_PROJECT_DIR", wm).env("OMP_NUM_THREADS", "1").output().unwrap();
+    let out = Command::new("sh")
+        .arg(case.join("Allrun"))
+        .env("WM_PROJECT_DIR", wm)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .unwrap();
     let seconds = started.elapsed().as_secs_f64();
     let log = std::fs::read_to_string(case.join(format!("log.{solver}"))).unwrap_or_default();
     assert!(
@@ -441,7 +482,9 @@ fn allrun(case: &Path, solver: &str) -> (String, f64) {
 /// Relative difference of the fluxes through the inlet and all outlets at the latest time.
 fn flow_imbalance(case: &Path, poly: &PolyMesh) -> f64 {
     let phi = latest_time(case).join("phi");
-    let sum = |name: &str| read_scalar_field(&phi, poly.n_cells, Some((name, poly.patch(name).unwrap().size))).iter().sum::<f64>();
+    let sum = |name: &str| {
+        read_scalar_field(&phi, poly.n_cells, Some((name, poly.patch(name).unwrap().size))).iter().sum::<f64>()
+    };
     let q_in = -sum("inlet");
     let q_out: f64 = poly.patches.iter().filter(|p| p.name.starts_with("outlet")).map(|p| sum(&p.name)).sum();
     (q_in - q_out).abs() / q_in
@@ -459,9 +502,17 @@ fn bent_tube_passes_checkmesh_and_its_case_converges() {
     let poly = read_polymesh(&case).unwrap();
     let (log, seconds) = allrun(&case, "simpleFoam");
     let converged = log.lines().find(|l| l.contains("solution converged in"));
-    assert!(converged.is_some(), "simpleFoam did not converge on the bent tube:\n{}", &log[log.len().saturating_sub(3000)..]);
+    assert!(
+        converged.is_some(),
+        "simpleFoam did not converge on the bent tube:\n{}",
+        &log[log.len().saturating_sub(3000)..]
+    );
     let imbalance = flow_imbalance(&case, &poly);
-    eprintln!("bent tube: {} cells; {}; flow imbalance {imbalance:.2e}; Allrun {seconds:.1} s", poly.n_cells, converged.unwrap().trim());
+    eprintln!(
+        "bent tube: {} cells; {}; flow imbalance {imbalance:.2e}; Allrun {seconds:.1} s",
+        poly.n_cells,
+        converged.unwrap().trim()
+    );
     assert!(imbalance < 1e-6);
     cleanup(&dir);
 }
@@ -508,7 +559,10 @@ fn command_line_writes_binary_cases() {
     }
     stl.push_str("endsolid tube\n");
     std::fs::write(dir.join("tube.stl"), stl).unwrap();
-    let csv: String = std::iter::once("x,y,z,r".to_string()).chain((0..=60).map(|i| format!("0,0,{},2", 0.5 * i as f64))).collect::<Vec<_>>().join("\n");
+    let csv: String = std::iter::once("x,y,z,r".to_string())
+        .chain((0..=60).map(|i| format!("0,0,{},2", 0.5 * i as f64)))
+        .collect::<Vec<_>>()
+        .join("\n");
     std::fs::write(dir.join("tube.csv"), csv).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_vesselhex"))
         .args(["mesh", "--quiet", "--surface", "tube.stl", "--centerlines", "tube.csv", "--output", "out"])
@@ -535,7 +589,10 @@ fn foam_format_flag_is_parsed() {
     let bin = env!("CARGO_BIN_EXE_vesselhex");
     let help = Command::new(bin).args(["mesh", "--help"]).output().unwrap();
     assert!(String::from_utf8_lossy(&help.stdout).contains("--foam-format"));
-    let bad = Command::new(bin).args(["mesh", "--surface", "x.stl", "--output", "o", "--foam-format", "hdf5"]).output().unwrap();
+    let bad = Command::new(bin)
+        .args(["mesh", "--surface", "x.stl", "--output", "o", "--foam-format", "hdf5"])
+        .output()
+        .unwrap();
     assert!(!bad.status.success());
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("ascii") && err.contains("binary"), "{err}");

@@ -137,7 +137,8 @@ impl PolyMesh {
     }
     /// Volume enclosed by the boundary (divergence theorem).
     pub fn volume(&self) -> f64 {
-        (self.n_internal()..self.faces.len()).map(|f| self.face_centre(f).coords.dot(&self.face_area(f))).sum::<f64>() / 3.0
+        (self.n_internal()..self.faces.len()).map(|f| self.face_centre(f).coords.dot(&self.face_area(f))).sum::<f64>()
+            / 3.0
     }
 
     /// The rules OpenFOAM relies on, including those checkMesh does not check: sizes, owner <
@@ -252,7 +253,8 @@ fn build(
     for (p, &n) in point_node.iter().enumerate() {
         node_point[n as usize] = p as u32;
     }
-    let points: Vec<Point3<f64>> = point_node.iter().map(|&n| Point3::from(mesh.nodes[n as usize].coords * MM_TO_M)).collect();
+    let points: Vec<Point3<f64>> =
+        point_node.iter().map(|&n| Point3::from(mesh.nodes[n as usize].coords * MM_TO_M)).collect();
     let cell_face = |slot: usize| -> [u32; 4] {
         face_nodes(&mesh.hexes[first + slot / 6], slot % 6).map(|n| node_point[n as usize])
     };
@@ -393,7 +395,11 @@ fn end_patches(mesh: &VesselMesh) -> Result<Vec<PatchSpec<'_>>> {
     let inlet = mesh.inlet().ok_or_else(|| Error::Geometry("OpenFOAM writer: the mesh has no inlet end".into()))?;
     let mut specs = Vec::new();
     for end in std::iter::once(inlet).chain(mesh.outlets()) {
-        specs.push(PatchSpec { name: end.name.clone(), kind: PatchKind::Patch, faces: face_set(mesh, &sets::lumen_end(&end.name))? });
+        specs.push(PatchSpec {
+            name: end.name.clone(),
+            kind: PatchKind::Patch,
+            faces: face_set(mesh, &sets::lumen_end(&end.name))?,
+        });
     }
     Ok(specs)
 }
@@ -401,7 +407,11 @@ fn end_patches(mesh: &VesselMesh) -> Result<Vec<PatchSpec<'_>>> {
 /// The polyMesh of the lumen: patches inlet, outlets, wall; cellZone lumen.
 pub fn lumen_polymesh(mesh: &VesselMesh) -> Result<PolyMesh> {
     let mut specs = end_patches(mesh)?;
-    specs.push(PatchSpec { name: "wall".into(), kind: PatchKind::Wall, faces: face_set(mesh, sets::LUMEN_WALL_FACES)? });
+    specs.push(PatchSpec {
+        name: "wall".into(),
+        kind: PatchKind::Wall,
+        faces: face_set(mesh, sets::LUMEN_WALL_FACES)?,
+    });
     let lumen = mesh.lumen_range();
     build(mesh, lumen.clone(), &specs, None, &[(Region::Lumen.name().to_string(), lumen)])
 }
@@ -422,7 +432,8 @@ pub fn fsi_polymesh(mesh: &VesselMesh) -> Result<PolyMesh> {
         kind: PatchKind::Patch,
         faces: face_set(mesh, sets::WALL_OUTER_FACES)?,
     });
-    let zones: Vec<(String, Range<usize>)> = Region::ALL.iter().map(|r| (r.name().to_string(), mesh.region_range(*r))).collect();
+    let zones: Vec<(String, Range<usize>)> =
+        Region::ALL.iter().map(|r| (r.name().to_string(), mesh.region_range(*r))).collect();
     if mesh.wall_range().is_empty() {
         return Err(Error::Geometry("OpenFOAM writer (openfoam-fsi): the mesh has no wall elements".into()));
     }
@@ -432,7 +443,14 @@ pub fn fsi_polymesh(mesh: &VesselMesh) -> Result<PolyMesh> {
 // ---------------------------------------------------------------------------------------------
 // Files
 
-fn header(w: &mut dyn Write, binary: bool, class: &str, location: &str, object: &str, note: Option<&str>) -> std::io::Result<()> {
+fn header(
+    w: &mut dyn Write,
+    binary: bool,
+    class: &str,
+    location: &str,
+    object: &str,
+    note: Option<&str>,
+) -> std::io::Result<()> {
     writeln!(w, "/*--------------------------------*- C++ -*----------------------------------*\\")?;
     writeln!(w, "  Written by vesselhex {}", env!("CARGO_PKG_VERSION"))?;
     writeln!(w, "\\*---------------------------------------------------------------------------*/")?;
@@ -495,7 +513,11 @@ pub fn write_polymesh(poly: &PolyMesh, binary: bool, case: &Path) -> Result<Vec<
     file("points", &|w| {
         header(w, binary, "vectorField", loc, "points", None)?;
         if binary {
-            binary_list(w, poly.points.len(), poly.points.iter().flat_map(|p| [p.x, p.y, p.z]).flat_map(f64::to_le_bytes))?;
+            binary_list(
+                w,
+                poly.points.len(),
+                poly.points.iter().flat_map(|p| [p.x, p.y, p.z]).flat_map(f64::to_le_bytes),
+            )?;
         } else {
             writeln!(w, "{}\n(", poly.points.len())?;
             for p in &poly.points {
@@ -566,7 +588,12 @@ pub fn write_polymesh(poly: &PolyMesh, binary: bool, case: &Path) -> Result<Vec<
     Ok(out)
 }
 
-fn write_cell_zones(w: &mut dyn Write, location: &str, object: &str, zones: &[(String, Vec<u32>)]) -> std::io::Result<()> {
+fn write_cell_zones(
+    w: &mut dyn Write,
+    location: &str,
+    object: &str,
+    zones: &[(String, Vec<u32>)],
+) -> std::io::Result<()> {
     header(w, false, "regIOobject", location, object, None)?;
     writeln!(w, "{}\n(", zones.len())?;
     for (name, cells) in zones {
@@ -672,10 +699,12 @@ pub fn inlet_velocities(poly: &PolyMesh, inlet: &Patch, config: &OpenFoamConfig)
             let d: Vec<f64> = faces.clone().map(|f| dist(&poly.face_centre(f))).collect();
             let d_points = faces.clone().flat_map(|f| poly.faces[f]).map(|p| dist(&poly.points[p as usize]));
             let d_max = d.iter().copied().chain(d_points).fold(0.0, f64::max);
-            d.iter().map(|&d| {
-                let rho = (d / d_max).min(1.0);
-                rho * (2.0 - rho)
-            }).collect()
+            d.iter()
+                .map(|&d| {
+                    let rho = (d / d_max).min(1.0);
+                    rho * (2.0 - rho)
+                })
+                .collect()
         }
     };
     let flow_rate = config.flow_rate_ml_s.map(|q| q * 1e-6).unwrap_or(config.mean_velocity * area);
@@ -721,7 +750,16 @@ fn case_vars(poly: &PolyMesh, config: &OpenFoamConfig) -> Result<Vec<(&'static s
             let u_max = inflow.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
             let end = config.end_time.unwrap_or(2.0 * poly.volume() / inflow.flow_rate);
             let dt = 0.5 * min_centre_distance(poly) / u_max;
-            ("pimpleFoam", "Euler", "Gauss linearUpwind grad(U)", num(end), num(dt), "adjustableRunTime", num(end / 10.0), "yes")
+            (
+                "pimpleFoam",
+                "Euler",
+                "Gauss linearUpwind grad(U)",
+                num(end),
+                num(dt),
+                "adjustableRunTime",
+                num(end / 10.0),
+                "yes",
+            )
         }
     };
     Ok(vec![
@@ -735,10 +773,13 @@ fn case_vars(poly: &PolyMesh, config: &OpenFoamConfig) -> Result<Vec<(&'static s
         ("write_interval", write_interval),
         ("adjust_time_step", adjust.into()),
         ("nu", num(config.nu)),
-        ("profile", match config.profile {
-            InletProfile::Parabolic => "parabolic".into(),
-            InletProfile::Plug => "plug".into(),
-        }),
+        (
+            "profile",
+            match config.profile {
+                InletProfile::Parabolic => "parabolic".into(),
+                InletProfile::Plug => "plug".into(),
+            },
+        ),
         ("mean_velocity", num(inflow.flow_rate / inflow.area)),
         ("flow_rate", num(inflow.flow_rate)),
         ("inlet_velocity", u),
@@ -852,7 +893,10 @@ fn skip_ws(b: &[u8], mut i: usize) -> usize {
 fn list_start(path: &Path, b: &[u8], i: usize) -> Result<(usize, usize)> {
     let i = skip_ws(b, i);
     let end = i + b[i..].iter().take_while(|c| c.is_ascii_digit()).count();
-    let n: usize = std::str::from_utf8(&b[i..end]).ok().and_then(|s| s.parse().ok()).ok_or_else(|| read_err(path, "expected a list size"))?;
+    let n: usize = std::str::from_utf8(&b[i..end])
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .ok_or_else(|| read_err(path, "expected a list size"))?;
     let j = skip_ws(b, end);
     if b.get(j) != Some(&b'(') {
         return Err(read_err(path, "expected '(' after the list size"));
@@ -963,7 +1007,11 @@ pub fn read_polymesh(case: &Path) -> Result<PolyMesh> {
         let name = tokens[k].to_string();
         let close = k + tokens[k..].iter().position(|t| *t == "}").ok_or_else(|| read_err(&p, "unterminated patch"))?;
         let get = |key: &str| tokens[k..close].iter().position(|t| *t == key).map(|i| tokens[k + i + 1]);
-        let num = |key: &str| get(key).and_then(|v| v.parse::<usize>().ok()).ok_or_else(|| read_err(&p, format!("patch {name}: no {key}")));
+        let num = |key: &str| {
+            get(key)
+                .and_then(|v| v.parse::<usize>().ok())
+                .ok_or_else(|| read_err(&p, format!("patch {name}: no {key}")))
+        };
         let kind = if get("type") == Some("wall") { PatchKind::Wall } else { PatchKind::Patch };
         patches.push(Patch { kind, size: num("nFaces")?, start: num("startFace")?, name });
         k = close + 1;
