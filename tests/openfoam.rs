@@ -597,3 +597,33 @@ fn foam_format_flag_is_parsed() {
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("ascii") && err.contains("binary"), "{err}");
 }
+
+/// Time to build and write the polyMesh of a large lumen (about 800,000 hexes), ASCII and binary.
+/// Timing only: `cargo test --test openfoam -- --ignored --nocapture large`.
+#[test]
+#[ignore = "timing of a large mesh: run with --ignored"]
+fn large_lumen_write_time() {
+    let mut config = MeshConfig::preset(Preset::Fine);
+    config.lumen.axial_spacing_mm = Some(0.02);
+    let t = std::time::Instant::now();
+    let mesh = tube(&config);
+    let meshing = t.elapsed().as_secs_f64();
+    let dir = scratch("large");
+    for binary in [false, true] {
+        let t = std::time::Instant::now();
+        let poly = openfoam::lumen_polymesh(&mesh).unwrap();
+        let build = t.elapsed().as_secs_f64();
+        let files = openfoam::write_polymesh(&poly, binary, &dir.join(binary.to_string())).unwrap();
+        let total = t.elapsed().as_secs_f64();
+        let bytes: u64 = files.iter().map(|f| std::fs::metadata(dir.join(binary.to_string()).join(f)).unwrap().len()).sum();
+        eprintln!(
+            "large lumen: {} hexes (meshed in {meshing:.1} s); {}: faces built in {build:.2} s, written in {:.2} s \
+             ({:.0} MB)",
+            poly.n_cells,
+            if binary { "binary" } else { "ascii" },
+            total - build,
+            bytes as f64 / 1e6
+        );
+    }
+    cleanup(&dir);
+}
