@@ -615,7 +615,8 @@ fn large_lumen_write_time() {
         let build = t.elapsed().as_secs_f64();
         let files = openfoam::write_polymesh(&poly, binary, &dir.join(binary.to_string())).unwrap();
         let total = t.elapsed().as_secs_f64();
-        let bytes: u64 = files.iter().map(|f| std::fs::metadata(dir.join(binary.to_string()).join(f)).unwrap().len()).sum();
+        let bytes: u64 =
+            files.iter().map(|f| std::fs::metadata(dir.join(binary.to_string()).join(f)).unwrap().len()).sum();
         eprintln!(
             "large lumen: {} hexes (meshed in {meshing:.1} s); {}: faces built in {build:.2} s, written in {:.2} s \
              ({:.0} MB)",

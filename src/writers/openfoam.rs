@@ -33,6 +33,10 @@
 //! velocity is written per inlet face ([`inlet_velocities`]): parabolic in the distance to the
 //! section boundary, or plug, scaled so that the inlet flux is exactly the flow rate asked.
 //! Outlets: zero-gradient velocity, pressure 0; wall: no-slip.
+//!
+//! A patch named `wall` of type `wall` makes OpenFOAM v1912 print a harmless "Removed patchGroup
+//! 'wall' which clashes with patch 2 of the same name" warning (the type puts every wall patch in
+//! the group `wall`); the name is kept because users and the issue expect it.
 
 use super::{write_atomic, WriteOptions};
 use crate::config::{FoamSolver, InletProfile, OpenFoamConfig};
@@ -253,8 +257,9 @@ fn build(
     for (p, &n) in point_node.iter().enumerate() {
         node_point[n as usize] = p as u32;
     }
+    // `+ 0.0` turns -0 into 0, so that files never show "-0e0".
     let points: Vec<Point3<f64>> =
-        point_node.iter().map(|&n| Point3::from(mesh.nodes[n as usize].coords * MM_TO_M)).collect();
+        point_node.iter().map(|&n| (mesh.nodes[n as usize].coords * MM_TO_M).map(|x| x + 0.0).into()).collect();
     let cell_face = |slot: usize| -> [u32; 4] {
         face_nodes(&mesh.hexes[first + slot / 6], slot % 6).map(|n| node_point[n as usize])
     };
@@ -710,7 +715,7 @@ pub fn inlet_velocities(poly: &PolyMesh, inlet: &Patch, config: &OpenFoamConfig)
     let flow_rate = config.flow_rate_ml_s.map(|q| q * 1e-6).unwrap_or(config.mean_velocity * area);
     let weighted: f64 = shape.iter().zip(&areas).map(|(s, a)| s * a.norm()).sum();
     let u0 = flow_rate / weighted;
-    let velocities = areas.iter().zip(&shape).map(|(a, s)| -a.normalize() * (u0 * s)).collect();
+    let velocities = areas.iter().zip(&shape).map(|(a, s)| (-a.normalize() * (u0 * s)).map(|x| x + 0.0)).collect();
     Inflow { flow_rate, area, velocities }
 }
 
