@@ -1138,4 +1138,24 @@ mod tests {
         }
         std::fs::remove_dir_all(&base).ok();
     }
+
+    #[test]
+    fn case_file_section_reaches_the_config() {
+        use crate::config::Preset;
+        let dir = std::env::temp_dir().join(format!("vesselhex-foam-config-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("case.toml");
+        let text = "[openfoam]\nsolver = \"pimpleFoam\"\nprofile = \"plug\"\nflow_rate_ml_s = 3.0\nbinary = true\n";
+        std::fs::write(&p, text).unwrap();
+        let c = MeshConfig::from_case_file(&p, Preset::Coarse).unwrap();
+        assert_eq!(c.openfoam.solver, FoamSolver::PimpleFoam);
+        assert_eq!(c.openfoam.profile, InletProfile::Plug);
+        assert_eq!(c.openfoam.flow_rate_ml_s, Some(3.0));
+        assert!(c.openfoam.binary);
+        assert_eq!(c.openfoam.nu, 3.5e-6);
+        std::fs::write(&p, "[openfoam]\nmean_velocity = -1.0\n").unwrap();
+        let e = MeshConfig::from_case_file(&p, Preset::Coarse).unwrap_err().to_string();
+        assert!(e.contains("openfoam.mean_velocity"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }
