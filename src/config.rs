@@ -185,6 +185,90 @@ impl WallConfig {
     }
 }
 
+/// Inlet velocity profile of the OpenFOAM case.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum InletProfile {
+    /// Developed (Poiseuille-like) profile, zero at the wall, precomputed per inlet face.
+    #[default]
+    Parabolic,
+    /// Uniform velocity over the inlet.
+    Plug,
+}
+
+/// Flow solver the OpenFOAM case is set up for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum FoamSolver {
+    /// Steady laminar SIMPLEC (`simpleFoam`).
+    #[default]
+    #[serde(rename = "simpleFoam")]
+    SimpleFoam,
+    /// Transient laminar PIMPLE (`pimpleFoam`), adaptive time step.
+    #[serde(rename = "pimpleFoam")]
+    PimpleFoam,
+}
+
+/// The OpenFOAM case written with the `openfoam` format (section `[openfoam]` of the case file).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct OpenFoamConfig {
+    /// Mean inlet velocity, m/s.
+    pub mean_velocity: f64,
+    /// Inlet volume flow rate, mL/s; when set, replaces `mean_velocity`.
+    pub flow_rate_ml_s: Option<f64>,
+    pub profile: InletProfile,
+    pub solver: FoamSolver,
+    /// Kinematic viscosity, m2/s (Newtonian blood: 3.5e-6).
+    pub nu: f64,
+    /// simpleFoam: maximum iterations (the run stops earlier on the residual criteria).
+    pub iterations: usize,
+    /// pimpleFoam: simulated time, s; by default two lumen volumes flow through.
+    pub end_time: Option<f64>,
+    /// Binary polyMesh files instead of ASCII (`--foam-format binary`).
+    pub binary: bool,
+}
+
+impl Default for OpenFoamConfig {
+    fn default() -> Self {
+        OpenFoamConfig {
+            mean_velocity: 0.1,
+            flow_rate_ml_s: None,
+            profile: InletProfile::Parabolic,
+            solver: FoamSolver::SimpleFoam,
+            nu: 3.5e-6,
+            iterations: 2000,
+            end_time: None,
+            binary: false,
+        }
+    }
+}
+
+impl OpenFoamConfig {
+    pub fn validate(&self) -> Result<()> {
+        let bad = |key: &str, why: &str| Err(Error::Config(format!("openfoam.{key}: {why}")));
+        if !(self.mean_velocity > 0.0 && self.mean_velocity.is_finite()) {
+            return bad("mean_velocity", "must be a positive velocity in m/s");
+        }
+        if let Some(q) = self.flow_rate_ml_s {
+            if !(q > 0.0 && q.is_finite()) {
+                return bad("flow_rate_ml_s", "must be a positive flow rate in mL/s");
+            }
+        }
+        if !(self.nu > 0.0 && self.nu.is_finite()) {
+            return bad("nu", "must be a positive kinematic viscosity in m2/s");
+        }
+        if !(1..=10_000_000).contains(&self.iterations) {
+            return bad("iterations", "must be between 1 and 10000000");
+        }
+        if let Some(t) = self.end_time {
+            if !(t > 0.0 && t.is_finite()) {
+                return bad("end_time", "must be a positive time in s");
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Everything `vesselhex mesh` needs besides the input files.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -199,6 +283,9 @@ pub struct MeshConfig {
     pub centerline: CenterlineConfig,
     pub lumen: LumenConfig,
     pub wall: WallConfig,
+    /// The OpenFOAM case (`openfoam` format): inflow, profile, solver, file format.
+    #[serde(default)]
+    pub openfoam: OpenFoamConfig,
 }
 
 impl Default for MeshConfig {
@@ -218,6 +305,7 @@ impl MeshConfig {
             centerline: CenterlineConfig::default(),
             lumen: LumenConfig::default(),
             wall: WallConfig::default(),
+            openfoam: OpenFoamConfig::default(),
         };
         match preset {
             Preset::Coarse => {}
@@ -322,6 +410,7 @@ impl MeshConfig {
                 return bad(&format!("wall.{name}.fibre_angle_deg"), "must be between 0 and 90 degrees");
             }
         }
+        self.openfoam.validate()?;
         let c = &self.centerline;
         if !(c.resample_step > 0.005 && c.resample_step <= 1.0) {
             return bad("centerline.resample_step", "must be between 0.005 and 1 (relative to the radius)");

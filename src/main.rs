@@ -67,6 +67,9 @@ struct MeshArgs {
     /// Output formats, comma-separated [default: vtu].
     #[arg(long, value_delimiter = ',')]
     formats: Option<Vec<String>>,
+    /// OpenFOAM polyMesh file format: ascii or binary [default: ascii, or the case file's openfoam.binary].
+    #[arg(long, value_parser = ["ascii", "binary"])]
+    foam_format: Option<String>,
     /// Output folder (created if needed).
     #[arg(long)]
     output: PathBuf,
@@ -83,7 +86,7 @@ struct MeshArgs {
 
 fn mesh(args: MeshArgs) -> vesselhex::Result<()> {
     let mut config = match &args.config {
-        Some(path) => MeshConfig::from_case_file(path, args.preset)?,
+        Some(path) => MeshConfig::from_case_file(path, args.preset.unwrap_or_default())?,
         None => MeshConfig::preset(args.preset.unwrap_or_default()),
     };
     if let Some(u) = args.units {
@@ -94,6 +97,9 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<()> {
     }
     if let Some(f) = args.formats {
         config.formats = f;
+    }
+    if let Some(f) = &args.foam_format {
+        config.openfoam.binary = f == "binary";
     }
     if let Some(n) = args.threads {
         rayon::ThreadPoolBuilder::new()

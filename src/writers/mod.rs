@@ -7,6 +7,7 @@ use crate::mesh::VesselMesh;
 use crate::units::LengthUnit;
 use std::path::{Path, PathBuf};
 
+pub mod openfoam;
 pub mod vtu;
 
 /// What every writer may need besides the mesh.
@@ -14,13 +15,31 @@ pub mod vtu;
 pub struct WriteOptions {
     /// Length unit of FE outputs (OpenFOAM is always in metres).
     pub length_unit: LengthUnit,
+    /// OpenFOAM polyMesh files in binary (`--foam-format binary`) instead of ASCII.
+    pub foam_binary: bool,
+    /// The OpenFOAM case settings (inflow, profile, solver).
+    pub openfoam: crate::config::OpenFoamConfig,
+}
+
+impl Default for WriteOptions {
+    fn default() -> Self {
+        WriteOptions { length_unit: LengthUnit::Mm, foam_binary: false, openfoam: Default::default() }
+    }
 }
 
 /// A writer puts its files under `dir` (a staging folder) and returns their paths relative to it.
 pub type WriterFn = fn(&VesselMesh, &WriteOptions, &Path) -> Result<Vec<PathBuf>>;
 
 /// The format table: name, what it writes, writer.
-pub const WRITERS: &[(&str, &str, WriterFn)] = &[("vtu", "mesh.vtu: VTK XML unstructured grid for ParaView", vtu::write_vtu)];
+pub const WRITERS: &[(&str, &str, WriterFn)] = &[
+    ("vtu", "mesh.vtu: VTK XML unstructured grid for ParaView", vtu::write_vtu),
+    ("openfoam", "openfoam/: polyMesh of the lumen (metres) and a laminar blood-flow case with Allrun", openfoam::write_openfoam),
+    (
+        "openfoam-fsi",
+        "openfoam-fsi/: lumen and wall in one polyMesh, cellZones per layer, interface faceZone, for splitMeshRegions",
+        openfoam::write_openfoam_fsi,
+    ),
+];
 
 /// The writer of a format name.
 pub fn writer(name: &str) -> Option<WriterFn> {

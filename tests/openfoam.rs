@@ -1,0 +1,630 @@
+//! The OpenFOAM writer judged by OpenFOAM itself (v1912, Debian `openfoam`): checkMesh on ASCII
+//! and binary cases, splitMeshRegions on the FSI mesh, and a laminar Poiseuille run.
+//!
+//! Without OpenFOAM the tests print "skipped"; with `CI=true` they fail instead. Set
+//! `VESSELHEX_KEEP=1` to keep the cases under the temporary folder.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use vesselhex::config::{MeshConfig, Preset};
+use vesselhex::mesh::VesselMesh;
+use vesselhex::writers::openfoam::{self, read_polymesh, PolyMesh};
+use vesselhex::writers::WriteOptions;
+
+const FOAM_DIR: &str = "/usr/share/openfoam";
+
+/// True when OpenFOAM's binaries are on the PATH; panics when they are not and CI=true.
+fn openfoam_available(test: &str) -> bool {
+    let found = Command::new("sh").args(["-c", "command -v checkMesh"]).output().is_ok_and(|o| o.status.success());
+    if !found {
+        if std::env::var("CI").is_ok_and(|v| v == "true") {
+            panic!("{test}: OpenFOAM (checkMesh) is not installed but CI=true: apt-get install -y --no-install-recommends openfoam");
+        }
+        eprintln!("{test}: skipped (OpenFOAM's checkMesh not found)");
+    }
+    found
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("vesselhex-openfoam-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn cleanup(dir: &Path) {
+    if std::env::var_os("VESSELHEX_KEEP").is_none() {
+        let _ = std::fs::remove_dir_all(dir);
+    } else {
+        eprintln!("kept {}", dir.display());
+    }
+}
+
+/// Runs an OpenFOAM program; returns its output (stdout + stderr) and panics when it fails.
+fn foam(program: &str, args: &[&str], case: &Path) -> String {
+    let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
+    let out = Command::new(program)
+        .args(["-case", case.to_str().unwrap()])
+        .args(args)
+        .env("WM_PROJECT_DIR", wm)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {program}: {e}"));
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{program} {args:?} on {} failed:\n{text}", case.display());
+    text
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let target = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).unwrap();
+        }
+    }
+}
+
+/// checkMesh on a copy of the case (it writes sets into the case it checks). Pass = `Mesh OK.`
+/// and no line starting with `***` (its exit code is always 0). Returns the summary: mesh
+/// statistics and the patch table, which must not depend on the file format.
+fn check_mesh(case: &Path, extra: &[&str]) -> Vec<String> {
+    let copy = case.with_file_name(format!("{}-checkMesh", case.file_name().unwrap().to_str().unwrap()));
+    let _ = std::fs::remove_dir_all(&copy);
+    copy_dir(case, &copy);
+    let mut args = vec!["-noFunctionObjects"];
+    args.extend_from_slice(extra);
+    let log = foam("checkMesh", &args, &copy);
+    let _ = std::fs::remove_dir_all(&copy);
+    let failed: Vec<&str> = log.lines().filter(|l| l.trim_start().starts_with("***")).collect();
+    assert!(failed.is_empty(), "checkMesh on {}: {failed:?}\n{log}", case.display());
+    assert!(
+        log.lines().any(|l| l.trim() == "Mesh OK."),
+        "checkMesh on {} did not say Mesh OK.:\n{log}",
+        case.display()
+    );
+    let mut summary = Vec::new();
+    let mut section = "";
+    for line in log.lines() {
+        let t = line.trim();
+        if t.starts_with("Mesh stats") || t.starts_with("Checking patch topology") || t.starts_with("Checking geometry")
+        {
+            section = t;
+            continue;
+        }
+        if section.starts_with("Mesh stats") && t.contains(':') {
+            summary.push(t.split_whitespace().collect::<Vec<_>>().join(" "));
+        }
+        if section.starts_with("Checking patch topology") && !t.is_empty() && !t.starts_with("Patch") {
+            summary.push(t.split_whitespace().collect::<Vec<_>>().join(" "));
+        }
+    }
+    summary
+}
+
+/// Counts of the summary lines, e.g. "cells: 2240".
+fn stat(summary: &[String], key: &str) -> usize {
+    summary
+        .iter()
+        .find_map(|l| l.strip_prefix(&format!("{key}: ")))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no '{key}' in {summary:?}"))
+}
+
+fn write(mesh: &VesselMesh, format: &str, options: &WriteOptions, dir: &Path) -> PathBuf {
+    let writer = vesselhex::writers::writer(format).unwrap();
+    let files = writer(mesh, options, dir).unwrap();
+    assert!(files.iter().all(|f| f.starts_with(format)), "{files:?}");
+    dir.join(format)
+}
+
+fn assert_rules(poly: &PolyMesh, what: &str) {
+    let errors = poly.verify();
+    assert!(errors.is_empty(), "{what}: {} violations, first: {:?}", errors.len(), &errors[..errors.len().min(5)]);
+}
+
+fn tube(config: &MeshConfig) -> VesselMesh {
+    vesselhex::testing::straight_tube_mesh(config).unwrap().mesh
+}
+
+fn check_ascii_and_binary(mesh: &VesselMesh, name: &str) {
+    let dir = scratch(name);
+    let mut summaries = Vec::new();
+    for binary in [false, true] {
+        let options = WriteOptions { foam_binary: binary, ..Default::default() };
+        let case = write(mesh, "openfoam", &options, &dir.join(if binary { "binary" } else { "ascii" }));
+        // What checkMesh misses, on the files as written.
+        let poly = read_polymesh(&case).unwrap();
+        assert_rules(&poly, name);
+        let expected = openfoam::lumen_polymesh(mesh).unwrap();
+        assert_eq!(poly.points, expected.points, "{name}: points do not read back bit for bit");
+        assert_eq!(
+            (poly.faces.len(), poly.n_internal(), poly.n_cells),
+            (expected.faces.len(), expected.n_internal(), expected.n_cells)
+        );
+        let s = check_mesh(&case, &[]);
+        assert_eq!(stat(&s, "cells"), poly.n_cells, "{s:?}");
+        assert_eq!(stat(&s, "hexahedra"), poly.n_cells, "{s:?}");
+        assert_eq!(stat(&s, "faces"), poly.faces.len(), "{s:?}");
+        assert_eq!(stat(&s, "internal faces"), poly.n_internal(), "{s:?}");
+        assert_eq!(stat(&s, "points"), poly.points.len(), "{s:?}");
+        for p in &poly.patches {
+            let row = s
+                .iter()
+                .find(|l| l.split(' ').next() == Some(p.name.as_str()))
+                .unwrap_or_else(|| panic!("no patch {} in {s:?}", p.name));
+            assert_eq!(row.split(' ').nth(1), Some(p.size.to_string().as_str()), "{row}");
+        }
+        eprintln!("{name} {}: checkMesh Mesh OK; {}", if binary { "binary" } else { "ascii" }, s.join("; "));
+        summaries.push(s);
+    }
+    assert_eq!(summaries[0], summaries[1], "{name}: ASCII and binary give different checkMesh summaries");
+    cleanup(&dir);
+}
+
+#[test]
+fn checkmesh_accepts_the_straight_tube_ascii_and_binary() {
+    if !openfoam_available("checkmesh_accepts_the_straight_tube_ascii_and_binary") {
+        return;
+    }
+    for preset in [Preset::Coarse, Preset::Medium] {
+        check_ascii_and_binary(&tube(&MeshConfig::preset(preset)), &format!("tube-{preset:?}"));
+    }
+    // An odd core and a graded boundary layer.
+    let mut c = MeshConfig::preset(Preset::Coarse);
+    c.lumen.core_elements = 3;
+    c.lumen.radial_elements = 6;
+    c.lumen.first_cell_height = Some(0.05);
+    check_ascii_and_binary(&tube(&c), "tube-odd-core");
+}
+
+fn boundary_text(case: &Path, region: &str) -> String {
+    std::fs::read_to_string(case.join("constant").join(region).join("polyMesh/boundary")).unwrap()
+}
+
+/// The `nFaces` and `type` of a patch in a boundary file.
+fn patch_entry(boundary: &str, name: &str) -> Option<(usize, String)> {
+    let start = boundary.lines().position(|l| l.trim() == name)?;
+    let lines: Vec<&str> = boundary.lines().skip(start).take_while(|l| l.trim() != "}").collect();
+    let get = |key: &str| {
+        lines.iter().find_map(|l| l.trim().strip_prefix(key)).map(|v| v.trim().trim_end_matches(';').to_string())
+    };
+    Some((get("nFaces")?.parse().ok()?, get("type")?))
+}
+
+#[test]
+fn fsi_mesh_passes_checkmesh_and_splits_into_fluid_and_solid_regions() {
+    if !openfoam_available("fsi_mesh_passes_checkmesh_and_splits_into_fluid_and_solid_regions") {
+        return;
+    }
+    let mesh = tube(&MeshConfig::preset(Preset::Coarse));
+    let dir = scratch("fsi");
+    let case = write(&mesh, "openfoam-fsi", &WriteOptions::default(), &dir);
+    let poly = read_polymesh(&case).unwrap();
+    assert_rules(&poly, "fsi");
+    let names: Vec<&str> = poly.patches.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["inlet", "outlet", "wall_inlet", "wall_outlet", "wall_outer"]);
+    let s = check_mesh(&case, &[]);
+    assert_eq!(stat(&s, "cells"), mesh.hexes.len());
+    assert_eq!(stat(&s, "cell zones"), 4);
+    assert_eq!(stat(&s, "face zones"), 1);
+    eprintln!("fsi: checkMesh Mesh OK; {}", s.join("; "));
+    let binary =
+        write(&mesh, "openfoam-fsi", &WriteOptions { foam_binary: true, ..Default::default() }, &dir.join("binary"));
+    assert_eq!(read_polymesh(&binary).unwrap(), poly);
+    assert_eq!(check_mesh(&binary, &[]), s, "fsi: ASCII and binary give different checkMesh summaries");
+    let interface = mesh.face_sets[vesselhex::mesh::sets::LUMEN_WALL_FACES].len();
+
+    // Fluid and solid: the cellZones of constant/fluidSolidZones.
+    let two = dir.join("fluid-solid");
+    copy_dir(&case, &two);
+    let log = foam("splitMeshRegions", &["-cellZonesFileOnly", "fluidSolidZones", "-overwrite"], &two);
+    for (region, other) in [("fluid", "solid"), ("solid", "fluid")] {
+        let b = boundary_text(&two, region);
+        let (n, kind) = patch_entry(&b, &format!("{region}_to_{other}"))
+            .unwrap_or_else(|| panic!("{region}: no interface patch\n{b}\n{log}"));
+        assert_eq!((n, kind.as_str()), (interface, "mappedWall"), "{region}");
+        assert!(b.contains(&format!("sampleRegion    {other};")), "{b}");
+        let s = check_mesh(&two, &["-region", region]);
+        eprintln!("fsi {region} region: checkMesh Mesh OK; {}", s.join("; "));
+    }
+    assert_eq!(patch_entry(&boundary_text(&two, "fluid"), "inlet").unwrap().0, poly.patch("inlet").unwrap().size);
+    assert_eq!(
+        patch_entry(&boundary_text(&two, "solid"), "wall_outer").unwrap().0,
+        poly.patch("wall_outer").unwrap().size
+    );
+
+    // One region per layer: splitMeshRegions -cellZones.
+    let four = dir.join("layers");
+    copy_dir(&case, &four);
+    let log = foam("splitMeshRegions", &["-cellZones", "-overwrite"], &four);
+    let lumen = boundary_text(&four, "lumen");
+    let (n, kind) =
+        patch_entry(&lumen, "lumen_to_intima").unwrap_or_else(|| panic!("no lumen_to_intima\n{lumen}\n{log}"));
+    assert_eq!((n, kind.as_str()), (interface, "mappedWall"));
+    assert!(patch_entry(&boundary_text(&four, "media"), "media_to_adventitia").is_some());
+    cleanup(&dir);
+}
+
+/// Tokens of an OpenFOAM dictionary text: words, numbers and the punctuation ( ) { } ; apart.
+fn tokens(text: &str) -> Vec<String> {
+    let mut spaced = String::with_capacity(text.len() * 2);
+    for line in text.lines() {
+        let line = line.split("//").next().unwrap_or("");
+        for c in line.chars() {
+            if "(){};".contains(c) {
+                spaced.push(' ');
+                spaced.push(c);
+                spaced.push(' ');
+            } else {
+                spaced.push(c);
+            }
+        }
+        spaced.push('\n');
+    }
+    spaced.split_whitespace().map(str::to_string).collect()
+}
+
+/// A scalar field entry starting at `t[i]` = "uniform" | "nonuniform": its values (a uniform
+/// value is repeated `n` times).
+fn scalar_values(t: &[String], i: usize, n: usize) -> Vec<f64> {
+    if t[i] == "uniform" {
+        return vec![t[i + 1].parse().unwrap(); n];
+    }
+    assert_eq!(t[i], "nonuniform");
+    let count: usize = t[i + 2].parse().unwrap();
+    assert_eq!(t[i + 3], "(");
+    t[i + 4..i + 4 + count].iter().map(|v| v.parse().unwrap()).collect()
+}
+
+/// The internal field and the boundary values of a patch of a written scalar field.
+fn read_scalar_field(path: &Path, n_cells: usize, patch: Option<(&str, usize)>) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let t = tokens(&text);
+    match patch {
+        None => {
+            let i = t.iter().position(|x| x == "internalField").unwrap();
+            scalar_values(&t, i + 1, n_cells)
+        }
+        Some((name, n)) => {
+            let b = t.iter().position(|x| x == "boundaryField").unwrap();
+            let p =
+                b + t[b..].iter().position(|x| x == name).unwrap_or_else(|| panic!("no {name} in {}", path.display()));
+            let v = p + t[p..].iter().position(|x| x == "value").unwrap();
+            scalar_values(&t, v + 1, n)
+        }
+    }
+}
+
+fn latest_time(case: &Path) -> PathBuf {
+    let mut times: Vec<(f64, PathBuf)> = std::fs::read_dir(case)
+        .unwrap()
+        .filter_map(|e| {
+            let e = e.ok()?;
+            let t: f64 = e.file_name().to_str()?.parse().ok()?;
+            Some((t, e.path()))
+        })
+        .collect();
+    times.sort_by(|a, b| a.0.total_cmp(&b.0));
+    times.pop().unwrap().1
+}
+
+/// Hagen-Poiseuille: the straight tube, case as written (simpleFoam, laminar, parabolic inlet),
+/// run through its Allrun.
+///
+/// Measured: the kinematic pressure on the inlet (zero-gradient pressure: the inlet face value
+/// is the adjacent cell value; area-weighted mean) minus the outlet's (p = 0), against
+/// 8 nu L Q / (pi R^4) with L the inlet-to-outlet length: the momentum balance of the whole tube
+/// (inlet pressure force = wall shear). Also the developed pressure gradient, fitted over the
+/// middle half of the tube, times L, against the same figure. R is the radius of the circle with
+/// the area of the meshed (polygonal) section, R^4 = (A / pi)^2; the Poiseuille resistance of a
+/// regular polygon with as many sides as the O-grid rim (24 at the medium preset) differs from
+/// that of its equal-area circle by well under 1 %, while the nominal 2 mm radius would
+/// overstate the area by 1.1 %, the resistance by 2.3 %. Flow balance: the sums of the face
+/// fluxes `phi` written by the solver on the inlet and outlet patches.
+#[test]
+fn poiseuille_pressure_drop_and_flow_balance() {
+    if !openfoam_available("poiseuille_pressure_drop_and_flow_balance") {
+        return;
+    }
+    let mut config = MeshConfig::preset(Preset::Medium);
+    // Axial resolution does not matter for a developed flow: coarser along the axis to run fast.
+    config.lumen.axial_spacing_mm = Some(1.0);
+    let mesh = tube(&config);
+    let dir = scratch("poiseuille");
+    let options = WriteOptions::default();
+    let of = &options.openfoam;
+    let case = write(&mesh, "openfoam", &options, &dir);
+    let poly = read_polymesh(&case).unwrap();
+
+    let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
+    let started = std::time::Instant::now();
+    let out = Command::new("sh")
+        .arg(case.join("Allrun"))
+        .env("WM_PROJECT_DIR", wm)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .unwrap();
+    let seconds = started.elapsed().as_secs_f64();
+    let log = std::fs::read_to_string(case.join("log.simpleFoam")).unwrap_or_default();
+    assert!(
+        out.status.success(),
+        "Allrun failed: {}{}\n{log}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let converged = log.lines().find(|l| l.contains("solution converged in"));
+    assert!(converged.is_some(), "simpleFoam did not converge:\n{}", &log[log.len().saturating_sub(3000)..]);
+    let time = latest_time(&case);
+
+    let inlet = poly.patch("inlet").unwrap();
+    let outlet = poly.patch("outlet").unwrap();
+    let phi = time.join("phi");
+    let q_in = -read_scalar_field(&phi, poly.n_cells, Some(("inlet", inlet.size))).iter().sum::<f64>();
+    let q_out: f64 = read_scalar_field(&phi, poly.n_cells, Some(("outlet", outlet.size))).iter().sum();
+    let area: f64 = inlet.range().map(|f| poly.face_area(f).norm()).sum();
+    let q = of.mean_velocity * area;
+    assert!((q_in - q).abs() < 1e-9 * q, "inflow {q_in} vs asked {q}");
+    let balance = (q_in - q_out).abs() / q_in;
+
+    let p = read_scalar_field(&time.join("p"), poly.n_cells, None);
+    let centres = poly.cell_centres();
+    let z_out = outlet.range().map(|f| poly.face_centre(f).z).sum::<f64>() / outlet.size as f64;
+    let z_in = inlet.range().map(|f| poly.face_centre(f).z).sum::<f64>() / inlet.size as f64;
+    let p_inlet = inlet.range().map(|f| poly.face_area(f).norm() * p[poly.owner[f] as usize]).sum::<f64>() / area;
+    let r4 = (area / std::f64::consts::PI).powi(2);
+    let hp = |length: f64| 8.0 * of.nu * length * q / (std::f64::consts::PI * r4);
+    let length = z_out - z_in;
+    let expected = hp(length);
+    let error = (p_inlet - expected) / expected;
+
+    // Developed gradient: least squares of p against z over the middle half.
+    let mid: Vec<(f64, f64)> = centres
+        .iter()
+        .zip(&p)
+        .filter(|(c, _)| c.z > z_in + 0.25 * length && c.z < z_in + 0.75 * length)
+        .map(|(c, p)| (c.z, *p))
+        .collect();
+    let n = mid.len() as f64;
+    let (mz, mp) = (mid.iter().map(|x| x.0).sum::<f64>() / n, mid.iter().map(|x| x.1).sum::<f64>() / n);
+    let slope = mid.iter().map(|(z, p)| (z - mz) * (p - mp)).sum::<f64>()
+        / mid.iter().map(|(z, _)| (z - mz).powi(2)).sum::<f64>();
+    let drop_fit = -slope * length;
+    let error_fit = (drop_fit - hp(length)) / hp(length);
+    let nominal = 8.0 * of.nu * length * q / (std::f64::consts::PI * 0.002f64.powi(4));
+
+    eprintln!(
+        "poiseuille: {} cells, Re {:.0}; Q {q:.6e} m3/s; inlet-to-outlet dp {p_inlet:.6e} m2/s2 vs {expected:.6e} \
+         ({:+.2} %) over {:.3} mm; fitted gradient x L {drop_fit:.6e} ({:+.2} %) \
+         (nominal R = 2 mm: {nominal:.6e}); inflow {q_in:.9e} outflow {q_out:.9e} relative imbalance {balance:.2e}; \
+         Allrun {seconds:.1} s; {}",
+        poly.n_cells,
+        of.mean_velocity * 2.0 * (area / std::f64::consts::PI).sqrt() / of.nu,
+        100.0 * error,
+        1e3 * length,
+        100.0 * error_fit,
+        converged.unwrap().trim()
+    );
+    assert!(error.abs() < 0.03, "pressure drop off by {:.2} %", 100.0 * error);
+    assert!(error_fit.abs() < 0.03, "developed pressure gradient off by {:.2} %", 100.0 * error_fit);
+    assert!(balance < 1e-6, "inflow {q_in} vs outflow {q_out}");
+    cleanup(&dir);
+}
+
+/// A 60 degree bend: tube radius 2 mm bent on a 30 mm radius in the x-z plane, with its centerline.
+fn bent_tube(config: &MeshConfig) -> VesselMesh {
+    use nalgebra::{Point3, Vector3};
+    use vesselhex::input::{CenterlinePolyline, Centerlines, TriangleSurface};
+    let (r, bend, angle) = (2.0, 30.0, std::f64::consts::FRAC_PI_3);
+    let frame = |theta: f64| {
+        let p = Point3::new(bend * (1.0 - theta.cos()), 0.0, bend * theta.sin());
+        (p, Vector3::new(theta.cos(), 0.0, -theta.sin()), Vector3::y())
+    };
+    let (around, rings) = (96, 160);
+    let mut vertices = Vec::new();
+    for j in 0..=rings {
+        let (p, n, b) = frame(angle * j as f64 / rings as f64);
+        for i in 0..around {
+            let a = std::f64::consts::TAU * i as f64 / around as f64;
+            vertices.push(p + (n * a.cos() + b * a.sin()) * r);
+        }
+    }
+    let mut triangles = Vec::new();
+    for j in 0..rings {
+        for i in 0..around {
+            let a = (j * around + i) as u32;
+            let b = (j * around + (i + 1) % around) as u32;
+            let (c, d) = (a + around as u32, b + around as u32);
+            triangles.push([a, b, d]);
+            triangles.push([a, d, c]);
+        }
+    }
+    let surface = TriangleSurface { vertices, triangles, triangle_tags: None, source: "bent tube (in memory)".into() };
+    let points: Vec<Point3<f64>> = (0..=90).map(|i| frame(angle * i as f64 / 90.0).0).collect();
+    let centerlines = Centerlines {
+        polylines: vec![CenterlinePolyline {
+            radii: Some(vec![r; points.len()]),
+            points,
+            normals: None,
+            cell_tags: Default::default(),
+        }],
+        source: "bent tube centerline (in memory)".into(),
+    };
+    let mut progress = vesselhex::progress::Progress::new(true, 9);
+    vesselhex::pipeline::mesh_vessel(&surface, &centerlines, config, &mut progress).unwrap().mesh
+}
+
+/// Runs a written case's Allrun; returns the solver log and the run time.
+fn allrun(case: &Path, solver: &str) -> (String, f64) {
+    let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
+    let started = std::time::Instant::now();
+    let out = Command::new("sh")
+        .arg(case.join("Allrun"))
+        .env("WM_PROJECT_DIR", wm)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .unwrap();
+    let seconds = started.elapsed().as_secs_f64();
+    let log = std::fs::read_to_string(case.join(format!("log.{solver}"))).unwrap_or_default();
+    assert!(
+        out.status.success(),
+        "Allrun failed: {}{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+        &log[log.len().saturating_sub(3000)..]
+    );
+    (log, seconds)
+}
+
+/// Relative difference of the fluxes through the inlet and all outlets at the latest time.
+fn flow_imbalance(case: &Path, poly: &PolyMesh) -> f64 {
+    let phi = latest_time(case).join("phi");
+    let sum = |name: &str| {
+        read_scalar_field(&phi, poly.n_cells, Some((name, poly.patch(name).unwrap().size))).iter().sum::<f64>()
+    };
+    let q_in = -sum("inlet");
+    let q_out: f64 = poly.patches.iter().filter(|p| p.name.starts_with("outlet")).map(|p| sum(&p.name)).sum();
+    (q_in - q_out).abs() / q_in
+}
+
+#[test]
+fn bent_tube_passes_checkmesh_and_its_case_converges() {
+    if !openfoam_available("bent_tube_passes_checkmesh_and_its_case_converges") {
+        return;
+    }
+    let mesh = bent_tube(&MeshConfig::preset(Preset::Coarse));
+    check_ascii_and_binary(&mesh, "bent-tube");
+    let dir = scratch("bent-run");
+    let case = write(&mesh, "openfoam", &WriteOptions::default(), &dir);
+    let poly = read_polymesh(&case).unwrap();
+    let (log, seconds) = allrun(&case, "simpleFoam");
+    let converged = log.lines().find(|l| l.contains("solution converged in"));
+    assert!(
+        converged.is_some(),
+        "simpleFoam did not converge on the bent tube:\n{}",
+        &log[log.len().saturating_sub(3000)..]
+    );
+    let imbalance = flow_imbalance(&case, &poly);
+    eprintln!(
+        "bent tube: {} cells; {}; flow imbalance {imbalance:.2e}; Allrun {seconds:.1} s",
+        poly.n_cells,
+        converged.unwrap().trim()
+    );
+    assert!(imbalance < 1e-6);
+    cleanup(&dir);
+}
+
+#[test]
+fn pimplefoam_case_runs() {
+    if !openfoam_available("pimplefoam_case_runs") {
+        return;
+    }
+    let mesh = tube(&MeshConfig::preset(Preset::Coarse));
+    let dir = scratch("pimple");
+    let mut options = WriteOptions::default();
+    options.openfoam.solver = vesselhex::config::FoamSolver::PimpleFoam;
+    options.openfoam.end_time = Some(0.05);
+    let case = write(&mesh, "openfoam", &options, &dir);
+    let poly = read_polymesh(&case).unwrap();
+    let (log, seconds) = allrun(&case, "pimpleFoam");
+    assert!(log.lines().any(|l| l.trim() == "End"), "{}", &log[log.len().saturating_sub(3000)..]);
+    let steps = log.lines().filter(|l| l.starts_with("Time = ")).count();
+    let imbalance = flow_imbalance(&case, &poly);
+    eprintln!("pimpleFoam: {steps} steps to 0.05 s in {seconds:.1} s; flow imbalance {imbalance:.2e}");
+    assert!(imbalance < 1e-6);
+    cleanup(&dir);
+}
+
+/// The command line end to end: STL + CSV centerline in, `--formats openfoam,openfoam-fsi
+/// --foam-format binary` out. Needs the input readers, which are not on this branch (merged on
+/// main): run with `--ignored` after the merge.
+#[test]
+#[ignore = "needs the STL/CSV input readers (on main): run with --ignored after the merge"]
+fn command_line_writes_binary_cases() {
+    use std::fmt::Write as _;
+    let dir = scratch("cli");
+    let surface = vesselhex::testing::straight_tube_surface(2.0, 30.0, 96, 120);
+    let mut stl = String::from("solid tube\n");
+    for t in &surface.triangles {
+        let p = t.map(|i| surface.vertices[i as usize]);
+        let n = (p[1] - p[0]).cross(&(p[2] - p[0])).normalize();
+        writeln!(stl, "facet normal {} {} {}\nouter loop", n.x, n.y, n.z).unwrap();
+        for v in p {
+            writeln!(stl, "vertex {} {} {}", v.x, v.y, v.z).unwrap();
+        }
+        stl.push_str("endloop\nendfacet\n");
+    }
+    stl.push_str("endsolid tube\n");
+    std::fs::write(dir.join("tube.stl"), stl).unwrap();
+    let csv: String = std::iter::once("x,y,z,r".to_string())
+        .chain((0..=60).map(|i| format!("0,0,{},2", 0.5 * i as f64)))
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(dir.join("tube.csv"), csv).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_vesselhex"))
+        .args(["mesh", "--quiet", "--surface", "tube.stl", "--centerlines", "tube.csv", "--output", "out"])
+        .args(["--formats", "openfoam,openfoam-fsi", "--foam-format", "binary"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for case in ["openfoam", "openfoam-fsi"] {
+        let points = std::fs::read(dir.join("out").join(case).join("constant/polyMesh/points")).unwrap();
+        assert!(points.windows(13).any(|w| w == b"format      b"), "{case}: not binary");
+        assert_rules(&read_polymesh(&dir.join("out").join(case)).unwrap(), case);
+    }
+    assert!(dir.join("out/openfoam/Allrun").exists() && dir.join("out/openfoam/0/U").exists());
+    if openfoam_available("command_line_writes_binary_cases") {
+        check_mesh(&dir.join("out/openfoam"), &[]);
+        check_mesh(&dir.join("out/openfoam-fsi"), &[]);
+    }
+    cleanup(&dir);
+}
+
+#[test]
+fn foam_format_flag_is_parsed() {
+    let bin = env!("CARGO_BIN_EXE_vesselhex");
+    let help = Command::new(bin).args(["mesh", "--help"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&help.stdout).contains("--foam-format"));
+    let bad = Command::new(bin)
+        .args(["mesh", "--surface", "x.stl", "--output", "o", "--foam-format", "hdf5"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("ascii") && err.contains("binary"), "{err}");
+}
+
+/// Time to build and write the polyMesh of a large lumen (about 800,000 hexes), ASCII and binary.
+/// Timing only: `cargo test --test openfoam -- --ignored --nocapture large`.
+#[test]
+#[ignore = "timing of a large mesh: run with --ignored"]
+fn large_lumen_write_time() {
+    let mut config = MeshConfig::preset(Preset::Fine);
+    config.lumen.axial_spacing_mm = Some(0.02);
+    let t = std::time::Instant::now();
+    let mesh = tube(&config);
+    let meshing = t.elapsed().as_secs_f64();
+    let dir = scratch("large");
+    for binary in [false, true] {
+        let t = std::time::Instant::now();
+        let poly = openfoam::lumen_polymesh(&mesh).unwrap();
+        let build = t.elapsed().as_secs_f64();
+        let files = openfoam::write_polymesh(&poly, binary, &dir.join(binary.to_string())).unwrap();
+        let total = t.elapsed().as_secs_f64();
+        let bytes: u64 =
+            files.iter().map(|f| std::fs::metadata(dir.join(binary.to_string()).join(f)).unwrap().len()).sum();
+        eprintln!(
+            "large lumen: {} hexes (meshed in {meshing:.1} s); {}: faces built in {build:.2} s, written in {:.2} s \
+             ({:.0} MB)",
+            poly.n_cells,
+            if binary { "binary" } else { "ascii" },
+            total - build,
+            bytes as f64 / 1e6
+        );
+    }
+    cleanup(&dir);
+}
