@@ -86,7 +86,7 @@ struct MeshArgs {
 
 fn mesh(args: MeshArgs) -> vesselhex::Result<()> {
     let mut config = match &args.config {
-        Some(path) => MeshConfig::from_case_file(path, args.preset.unwrap_or_default())?,
+        Some(path) => MeshConfig::from_case_file(path, args.preset)?,
         None => MeshConfig::preset(args.preset.unwrap_or_default()),
     };
     if let Some(u) = args.units {

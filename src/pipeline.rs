@@ -247,7 +247,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let meshed = mesh_vessel(&surface, &centerlines, config, &mut progress)?;
 
     progress.stage("writing");
-    let options = WriteOptions { length_unit: config.output_units, foam_binary: config.openfoam.binary, openfoam: config.openfoam.clone() };
+    let options = WriteOptions::from_config(config);
     let mut outputs = Vec::new();
     for f in &formats {
         let write = writers::writer(f).expect("checked above");

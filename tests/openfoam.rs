@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use vesselhex::config::{MeshConfig, Preset};
+use vesselhex::config::{MeshConfig, OpenFoamConfig, Preset};
 use vesselhex::mesh::VesselMesh;
 use vesselhex::writers::openfoam::{self, read_polymesh, PolyMesh};
 use vesselhex::writers::WriteOptions;
@@ -134,7 +134,7 @@ fn check_ascii_and_binary(mesh: &VesselMesh, name: &str) {
     let dir = scratch(name);
     let mut summaries = Vec::new();
     for binary in [false, true] {
-        let options = WriteOptions { foam_binary: binary, ..Default::default() };
+        let options = WriteOptions { openfoam: OpenFoamConfig { binary, ..Default::default() }, ..Default::default() };
         let case = write(mesh, "openfoam", &options, &dir.join(if binary { "binary" } else { "ascii" }));
         // What checkMesh misses, on the files as written.
         let poly = read_polymesh(&case).unwrap();
@@ -213,7 +213,7 @@ fn fsi_mesh_passes_checkmesh_and_splits_into_fluid_and_solid_regions() {
     assert_eq!(stat(&s, "face zones"), 1);
     eprintln!("fsi: checkMesh Mesh OK; {}", s.join("; "));
     let binary =
-        write(&mesh, "openfoam-fsi", &WriteOptions { foam_binary: true, ..Default::default() }, &dir.join("binary"));
+        write(&mesh, "openfoam-fsi", &WriteOptions { openfoam: OpenFoamConfig { binary: true, ..Default::default() }, ..Default::default() }, &dir.join("binary"));
     assert_eq!(read_polymesh(&binary).unwrap(), poly);
     assert_eq!(check_mesh(&binary, &[]), s, "fsi: ASCII and binary give different checkMesh summaries");
     let interface = mesh.face_sets[vesselhex::mesh::sets::LUMEN_WALL_FACES].len();
@@ -542,7 +542,7 @@ fn pimplefoam_case_runs() {
 /// --foam-format binary` out. Needs the input readers, which are not on this branch (merged on
 /// main): run with `--ignored` after the merge.
 #[test]
-#[ignore = "needs the STL/CSV input readers (on main): run with --ignored after the merge"]
+
 fn command_line_writes_binary_cases() {
     use std::fmt::Write as _;
     let dir = scratch("cli");

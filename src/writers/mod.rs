@@ -15,15 +15,20 @@ pub mod vtu;
 pub struct WriteOptions {
     /// Length unit of FE outputs (OpenFOAM is always in metres).
     pub length_unit: LengthUnit,
-    /// OpenFOAM polyMesh files in binary (`--foam-format binary`) instead of ASCII.
-    pub foam_binary: bool,
-    /// The OpenFOAM case settings (inflow, profile, solver).
+    /// The OpenFOAM case settings (inflow, profile, solver, ASCII or binary).
     pub openfoam: crate::config::OpenFoamConfig,
 }
 
 impl Default for WriteOptions {
     fn default() -> Self {
-        WriteOptions { length_unit: LengthUnit::Mm, foam_binary: false, openfoam: Default::default() }
+        WriteOptions { length_unit: LengthUnit::Mm, openfoam: Default::default() }
+    }
+}
+
+impl WriteOptions {
+    /// The writers' share of a configuration.
+    pub fn from_config(config: &crate::config::MeshConfig) -> Self {
+        WriteOptions { length_unit: config.output_units, openfoam: config.openfoam.clone() }
     }
 }
 

@@ -20,7 +20,7 @@
 //!   `fluid_to_solid` / `solid_to_fluid`); `splitMeshRegions -cellZones` gives one region per layer.
 //!
 //! Every boundary face belongs to exactly one patch, or the writer fails and names the face.
-//! ASCII by default; binary (`foam_binary`) writes points, faces (`faceCompactList`), owner and
+//! ASCII by default; binary (`openfoam.binary`) writes points, faces (`faceCompactList`), owner and
 //! neighbour as little-endian 32-bit labels and 64-bit scalars; boundary and zones stay ASCII.
 //! Floats are written in Rust's shortest round-trip form, so reading them back gives the same
 //! bits, and the output is byte-identical for the same mesh.
@@ -822,7 +822,7 @@ pub fn write_openfoam(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> 
 pub fn write_case(poly: &PolyMesh, options: &WriteOptions, case: &Path) -> Result<Vec<PathBuf>> {
     options.openfoam.validate()?;
     let vars = case_vars(poly, &options.openfoam)?;
-    let mut out = write_polymesh(poly, options.foam_binary, case)?;
+    let mut out = write_polymesh(poly, options.openfoam.binary, case)?;
     for (rel, text) in TEMPLATES {
         let rendered = render(rel, text, &vars)?;
         out.push(write_text(case, rel, &rendered, *rel == "Allrun")?);
@@ -835,7 +835,7 @@ pub fn write_case(poly: &PolyMesh, options: &WriteOptions, case: &Path) -> Resul
 pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
     let poly = fsi_polymesh(mesh)?;
     let case = dir.join("openfoam-fsi");
-    let mut out = write_polymesh(&poly, options.foam_binary, &case)?;
+    let mut out = write_polymesh(&poly, options.openfoam.binary, &case)?;
     let lumen = lumen_polymesh(mesh)?;
     let vars = case_vars(&lumen, &options.openfoam)?;
     for (rel, text) in TEMPLATES.iter().filter(|(rel, _)| rel.starts_with("system/")) {
@@ -1103,7 +1103,7 @@ mod tests {
         let mut read = Vec::new();
         for (k, binary) in [false, true, false].into_iter().enumerate() {
             let dir = base.join(k.to_string());
-            let options = WriteOptions { foam_binary: binary, ..Default::default() };
+            let options = WriteOptions { openfoam: crate::config::OpenFoamConfig { binary, ..Default::default() }, ..Default::default() };
             write_openfoam(&m, &options, &dir).unwrap();
             read.push(read_polymesh(&dir.join("openfoam")).unwrap());
         }
@@ -1141,20 +1141,19 @@ mod tests {
 
     #[test]
     fn case_file_section_reaches_the_config() {
-        use crate::config::Preset;
         let dir = std::env::temp_dir().join(format!("vesselhex-foam-config-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("case.toml");
         let text = "[openfoam]\nsolver = \"pimpleFoam\"\nprofile = \"plug\"\nflow_rate_ml_s = 3.0\nbinary = true\n";
         std::fs::write(&p, text).unwrap();
-        let c = MeshConfig::from_case_file(&p, Preset::Coarse).unwrap();
+        let c = MeshConfig::from_case_file(&p, None).unwrap();
         assert_eq!(c.openfoam.solver, FoamSolver::PimpleFoam);
         assert_eq!(c.openfoam.profile, InletProfile::Plug);
         assert_eq!(c.openfoam.flow_rate_ml_s, Some(3.0));
         assert!(c.openfoam.binary);
         assert_eq!(c.openfoam.nu, 3.5e-6);
         std::fs::write(&p, "[openfoam]\nmean_velocity = -1.0\n").unwrap();
-        let e = MeshConfig::from_case_file(&p, Preset::Coarse).unwrap_err().to_string();
+        let e = MeshConfig::from_case_file(&p, None).unwrap_err().to_string();
         assert!(e.contains("openfoam.mean_velocity"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
