@@ -55,7 +55,7 @@ fn run(label: &str, name: &str, config: &MeshConfig) {
     }
     let dir = std::env::temp_dir().join(format!("vesselhex-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
-    let options = WriteOptions { length_unit: config.output_units };
+    let options = WriteOptions { length_unit: config.output_units, febio: config.febio.clone() };
     for (format, _, write) in WRITERS {
         let t = Instant::now();
         let files = write(mesh, &options, &dir).expect("write");

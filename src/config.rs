@@ -182,6 +182,9 @@ pub struct MeshConfig {
     pub centerline: CenterlineConfig,
     pub lumen: LumenConfig,
     pub wall: WallConfig,
+    /// FEBio materials, loads and controls.
+    #[serde(default)]
+    pub febio: crate::writers::febio::FebioConfig,
 }
 
 impl Default for MeshConfig {
@@ -201,6 +204,7 @@ impl MeshConfig {
             centerline: CenterlineConfig::default(),
             lumen: LumenConfig::default(),
             wall: WallConfig::default(),
+            febio: Default::default(),
         };
         match preset {
             Preset::Coarse => {}
@@ -312,6 +316,7 @@ impl MeshConfig {
         if c.trim_inlet < 0.0 || c.trim_outlet < 0.0 {
             return bad("centerline.trim_inlet/trim_outlet", "must not be negative");
         }
+        self.febio.validate()?;
         Ok(())
     }
 }

@@ -7,20 +7,27 @@ use crate::mesh::VesselMesh;
 use crate::units::LengthUnit;
 use std::path::{Path, PathBuf};
 
+pub mod febio;
 pub mod vtu;
 
 /// What every writer may need besides the mesh.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct WriteOptions {
     /// Length unit of FE outputs (OpenFOAM is always in metres).
     pub length_unit: LengthUnit,
+    /// Materials, loads and controls of the FEBio decks (`[febio]` in the case file).
+    pub febio: febio::FebioConfig,
 }
 
 /// A writer puts its files under `dir` (a staging folder) and returns their paths relative to it.
 pub type WriterFn = fn(&VesselMesh, &WriteOptions, &Path) -> Result<Vec<PathBuf>>;
 
 /// The format table: name, what it writes, writer.
-pub const WRITERS: &[(&str, &str, WriterFn)] = &[("vtu", "mesh.vtu: VTK XML unstructured grid for ParaView", vtu::write_vtu)];
+pub const WRITERS: &[(&str, &str, WriterFn)] = &[
+    ("vtu", "mesh.vtu: VTK XML unstructured grid for ParaView", vtu::write_vtu),
+    ("febio", "febio/wall.feb: FEBio 4.0 wall, HGO layers with per-element fibre axes, lumen pressure", febio::write_wall),
+    ("febio-fsi", "febio/fsi.feb: FEBio 4.0 monolithic fluid-FSI model of lumen and wall", febio::write_fsi),
+];
 
 /// The writer of a format name.
 pub fn writer(name: &str) -> Option<WriterFn> {
