@@ -286,6 +286,9 @@ pub struct MeshConfig {
     /// The OpenFOAM case (`openfoam` format): inflow, profile, solver, file format.
     #[serde(default)]
     pub openfoam: OpenFoamConfig,
+    /// FEBio materials, loads and controls.
+    #[serde(default)]
+    pub febio: crate::writers::febio::FebioConfig,
 }
 
 impl Default for MeshConfig {
@@ -306,6 +309,7 @@ impl MeshConfig {
             lumen: LumenConfig::default(),
             wall: WallConfig::default(),
             openfoam: OpenFoamConfig::default(),
+            febio: Default::default(),
         };
         match preset {
             Preset::Coarse => {}
@@ -418,6 +422,7 @@ impl MeshConfig {
         if c.trim_inlet < 0.0 || c.trim_outlet < 0.0 {
             return bad("centerline.trim_inlet/trim_outlet", "must not be negative");
         }
+        self.febio.validate()?;
         Ok(())
     }
 }

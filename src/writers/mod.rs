@@ -8,27 +8,24 @@ use crate::units::LengthUnit;
 use std::path::{Path, PathBuf};
 
 pub mod openfoam;
+pub mod febio;
 pub mod vtu;
 
 /// What every writer may need besides the mesh.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct WriteOptions {
     /// Length unit of FE outputs (OpenFOAM is always in metres).
     pub length_unit: LengthUnit,
     /// The OpenFOAM case settings (inflow, profile, solver, ASCII or binary).
     pub openfoam: crate::config::OpenFoamConfig,
-}
-
-impl Default for WriteOptions {
-    fn default() -> Self {
-        WriteOptions { length_unit: LengthUnit::Mm, openfoam: Default::default() }
-    }
+    /// Materials, loads and controls of the FEBio decks (`[febio]` in the case file).
+    pub febio: febio::FebioConfig,
 }
 
 impl WriteOptions {
     /// The writers' share of a configuration.
     pub fn from_config(config: &crate::config::MeshConfig) -> Self {
-        WriteOptions { length_unit: config.output_units, openfoam: config.openfoam.clone() }
+        WriteOptions { length_unit: config.output_units, openfoam: config.openfoam.clone(), febio: config.febio.clone() }
     }
 }
 
@@ -44,6 +41,8 @@ pub const WRITERS: &[(&str, &str, WriterFn)] = &[
         "openfoam-fsi/: lumen and wall in one polyMesh, cellZones per layer, interface faceZone, for splitMeshRegions",
         openfoam::write_openfoam_fsi,
     ),
+    ("febio", "febio/wall.feb: FEBio 4.0 wall, HGO layers with per-element fibre axes, lumen pressure", febio::write_wall),
+    ("febio-fsi", "febio/fsi.feb: FEBio 4.0 monolithic fluid-FSI model of lumen and wall", febio::write_fsi),
 ];
 
 /// The writer of a format name.

@@ -1,0 +1,1041 @@
+//! FEBio 4.0 decks (`febio_spec version="4.0"`): the layered wall alone and a monolithic
+//! fluid-structure model of lumen and wall.
+//!
+//! * `febio/wall.feb` (format `febio`, Module `solid`): the wall elements, one `<Elements>` block
+//!   per layer (`intima`, `media`, `adventitia`), a Holzapfel-Gasser-Ogden material per layer, a
+//!   per-element `mat_axis` (`a` = e_circ, `d` = e_long, so FEBio's fibres lie at +-gamma from the
+//!   circumferential direction in the circumferential-longitudinal plane), the lumen pressure ramped
+//!   to [`FebioConfig::lumen_pressure_mmhg`], end rings held axially and the in-plane rigid modes
+//!   removed on symmetry lines of the end rings.
+//! * `febio/fsi.feb` (format `febio-fsi`, Module `fluid-FSI`): the lumen as a `fluid-FSI` domain
+//!   (blood) and the three layers as solid domains sharing the interface nodes; `fluid-FSI
+//!   traction` and no-slip on the interface, a parabolic inlet velocity, outlet pressure with
+//!   backflow stabilization, a dynamic analysis whose loads ramp over [`FsiControl::ramp_s`].
+//!
+//! Both decks follow the reader rules of `FORMATS.md` 2b and the structure of the two decks FEBio
+//! 4.11 ran to normal termination (`docs/examples/febio_*_tube.feb`). Labels are the mesh's:
+//! node id = node index + 1, element id = element index + 1 (as in every other deck), so ids are
+//! strictly increasing; `wall.feb` writes only the nodes its elements use (FEBio builds a
+//! node-id lookup table, gaps are allowed). Facets are the mesh's face sets wound with
+//! [`HEX_FACES`](crate::mesh::HEX_FACES), outward from the element they belong to: the wall's lumen
+//! facets point into the lumen, so a positive pressure inflates the wall.
+//!
+//! Material blocks and the `<Control>` sections come from `templates/febio/*.xml` (compiled in),
+//! whose `{{placeholders}}` are filled by [`fill_template`]; an unknown or unused placeholder is an
+//! error. Constants are kept in the config in physiological units (kPa, kg/m^3, Pa s, mmHg, m/s)
+//! and converted to the deck's consistent system, stated in a comment at the top of each deck:
+//! length = the output unit, time s, force N, hence mm -> tonne and MPa, m -> kg and Pa.
+
+use super::{write_atomic, WriteOptions};
+use crate::error::{Error, Result};
+use crate::mesh::{face_nodes, sets, ElementFace, Region, VesselMesh};
+use crate::units::LengthUnit;
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Path of the wall deck under the output folder.
+pub const WALL_DECK: &str = "febio/wall.feb";
+/// Path of the fluid-FSI deck under the output folder.
+pub const FSI_DECK: &str = "febio/fsi.feb";
+
+const TEMPLATE_HGO: (&str, &str) = ("hgo_material.xml", include_str!("../../templates/febio/hgo_material.xml"));
+const TEMPLATE_BLOOD: (&str, &str) =
+    ("fluid_fsi_material.xml", include_str!("../../templates/febio/fluid_fsi_material.xml"));
+const TEMPLATE_CONTROL_STATIC: (&str, &str) =
+    ("control_static.xml", include_str!("../../templates/febio/control_static.xml"));
+const TEMPLATE_CONTROL_FSI: (&str, &str) = ("control_fsi.xml", include_str!("../../templates/febio/control_fsi.xml"));
+
+/// One mmHg in Pa.
+const MMHG_PA: f64 = 133.322387415;
+
+// ------------------------------------------------------------------------------------------------
+// Configuration
+// ------------------------------------------------------------------------------------------------
+
+/// Holzapfel-Gasser-Ogden constants of one layer (FEBio `Holzapfel-Gasser-Ogden`, uncoupled). The
+/// fibre angle `gamma` is the layer's `fibre_angle_deg` from the wall configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HgoConstants {
+    /// Ground-matrix neo-Hookean constant c (psi = c/2 (I1 - 3)), kPa.
+    pub c_kpa: f64,
+    /// Fibre stiffness k1, kPa.
+    pub k1_kpa: f64,
+    /// Fibre exponent k2, dimensionless.
+    pub k2: f64,
+    /// Fibre dispersion, 0 (aligned) to 1/3 (isotropic).
+    pub kappa: f64,
+    /// Penalty bulk modulus k of the uncoupled formulation, kPa.
+    pub bulk_kpa: f64,
+    /// Mass density, kg/m^3 (needed by the dynamic FSI analysis).
+    pub density_kg_m3: f64,
+}
+
+/// Blood as FEBio's `fluid-FSI` material.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BloodConstants {
+    /// kg/m^3.
+    pub density_kg_m3: f64,
+    /// Bulk modulus of the (slightly compressible) fluid, Pa.
+    pub bulk_modulus_pa: f64,
+    /// Newtonian dynamic viscosity, Pa s.
+    pub viscosity_pa_s: f64,
+}
+
+impl Default for BloodConstants {
+    /// Density 1060 kg/m^3 and viscosity 3.5 mPa s (the usual Newtonian blood of large-artery
+    /// CFD); bulk modulus 2.2 GPa (water), as in FEBio's fluid-FSI verification problems
+    /// (`FORMATS.md` 2b: 1.06e-9 tonne/mm^3, k = 2.2e3 MPa, mu = 3.5e-9 MPa s).
+    fn default() -> Self {
+        BloodConstants { density_kg_m3: 1060.0, bulk_modulus_pa: 2.2e9, viscosity_pa_s: 3.5e-3 }
+    }
+}
+
+/// Loads and time stepping of the fluid-FSI deck.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FsiControl {
+    /// Mean inlet velocity at the end of the ramp (parabolic profile), m/s.
+    pub inlet_mean_velocity_m_s: f64,
+    /// Outlet pressure at the end of the ramp, mmHg.
+    pub outlet_pressure_mmhg: f64,
+    /// Duration of the linear ramp of inflow and outlet pressure, s.
+    pub ramp_s: f64,
+    /// Time step, s.
+    pub step_size_s: f64,
+    /// Number of time steps.
+    pub time_steps: usize,
+    /// Backflow stabilization coefficient on the outlets.
+    pub backflow_beta: f64,
+}
+
+impl Default for FsiControl {
+    /// 0.1 m/s mean inflow and 100 mmHg at the outlet, ramped over 0.1 s in steps of 1 ms; the
+    /// run covers the ramp (100 steps). The verified example ran 5 such steps.
+    fn default() -> Self {
+        FsiControl {
+            inlet_mean_velocity_m_s: 0.1,
+            outlet_pressure_mmhg: 100.0,
+            ramp_s: 0.1,
+            step_size_s: 1e-3,
+            time_steps: 100,
+            backflow_beta: 1.0,
+        }
+    }
+}
+
+/// The `[febio]` section of the case file.
+///
+/// Default wall constants and their sources (`FORMATS.md` section 4):
+/// * media: Holzapfel, Gasser, Ogden 2000 (J Elasticity 61:1-48, rabbit carotid): c = 3.0 kPa,
+///   k1 = 2.3632 kPa, k2 = 0.8393; adventitia from the same paper: c = 0.3 kPa, k1 = 0.562 kPa,
+///   k2 = 0.7112 (the fibre angles 29 and 62 deg of the wall configuration come from it too);
+/// * intima: taken equal to the media, as is common when the intima is not characterised;
+/// * kappa = 0: the 2000 model has no dispersion (it is also what CalculiX's fibre material,
+///   which has none, computes, so both decks describe the same law);
+/// * bulk modulus 3 MPa, 1000 times the largest c: HGO 2000 assume incompressibility;
+/// * density 1200 kg/m^3 (soft tissue; only the FSI deck's dynamics use it).
+///
+/// These are rabbit-carotid constants: soft. Give your own tissue's values for a human vessel.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FebioConfig {
+    /// Lumen pressure at the end of the static ramp of `wall.feb`, mmHg.
+    pub lumen_pressure_mmhg: f64,
+    /// Steps of the static ramp of `wall.feb` (the load reaches its value at t = 1).
+    pub static_steps: usize,
+    pub intima: HgoConstants,
+    pub media: HgoConstants,
+    pub adventitia: HgoConstants,
+    pub blood: BloodConstants,
+    pub fsi: FsiControl,
+}
+
+impl Default for FebioConfig {
+    fn default() -> Self {
+        let media = HgoConstants {
+            c_kpa: 3.0,
+            k1_kpa: 2.3632,
+            k2: 0.8393,
+            kappa: 0.0,
+            bulk_kpa: 3000.0,
+            density_kg_m3: 1200.0,
+        };
+        FebioConfig {
+            lumen_pressure_mmhg: 100.0,
+            static_steps: 10,
+            intima: media,
+            media,
+            adventitia: HgoConstants { c_kpa: 0.3, k1_kpa: 0.562, k2: 0.7112, ..media },
+            blood: BloodConstants::default(),
+            fsi: FsiControl::default(),
+        }
+    }
+}
+
+impl FebioConfig {
+    /// Checks ranges; a bad value is named with its key.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |key: &str, why: &str| Err(Error::Config(format!("febio.{key}: {why}")));
+        let positive = |x: f64| x > 0.0 && x.is_finite();
+        let non_negative = |x: f64| x >= 0.0 && x.is_finite();
+        for (name, h) in [("intima", &self.intima), ("media", &self.media), ("adventitia", &self.adventitia)] {
+            if !positive(h.c_kpa) {
+                return bad(&format!("{name}.c_kpa"), "must be positive");
+            }
+            if !non_negative(h.k1_kpa) || !non_negative(h.k2) {
+                return bad(&format!("{name}.k1_kpa/k2"), "must not be negative");
+            }
+            if !(0.0..=1.0 / 3.0).contains(&h.kappa) {
+                return bad(&format!("{name}.kappa"), "must be between 0 and 1/3 (FEBio rejects larger values)");
+            }
+            if !positive(h.bulk_kpa) || !positive(h.density_kg_m3) {
+                return bad(&format!("{name}.bulk_kpa/density_kg_m3"), "must be positive");
+            }
+        }
+        let b = &self.blood;
+        if !positive(b.density_kg_m3) || !positive(b.bulk_modulus_pa) || !positive(b.viscosity_pa_s) {
+            return bad("blood", "density, bulk modulus and viscosity must be positive");
+        }
+        if !self.lumen_pressure_mmhg.is_finite() || self.static_steps == 0 {
+            return bad("lumen_pressure_mmhg/static_steps", "need a finite pressure and at least one step");
+        }
+        let f = &self.fsi;
+        if !positive(f.ramp_s) || !positive(f.step_size_s) || f.time_steps == 0 {
+            return bad("fsi", "ramp_s and step_size_s must be positive and time_steps at least 1");
+        }
+        if !f.inlet_mean_velocity_m_s.is_finite() || !f.outlet_pressure_mmhg.is_finite() || !non_negative(f.backflow_beta) {
+            return bad("fsi", "inlet velocity and outlet pressure must be finite, backflow_beta not negative");
+        }
+        Ok(())
+    }
+}
+
+// ------------------------------------------------------------------------------------------------
+// Units
+// ------------------------------------------------------------------------------------------------
+
+/// The deck's consistent unit system: length = the output unit L (lambda metres), time s, force
+/// N, so mass = kg / lambda and stress = Pa / lambda^2.
+#[derive(Debug, Clone, Copy)]
+pub struct DeckUnits {
+    pub length: LengthUnit,
+}
+
+impl DeckUnits {
+    /// Deck length units in one metre (1/lambda), exact, so conversions are one correctly rounded
+    /// division: 1060 kg/m^3 becomes 1.06e-9 tonne/mm^3, not 1.0600000000000003e-9.
+    fn per_metre(self) -> f64 {
+        match self.length {
+            LengthUnit::Um => 1e6,
+            LengthUnit::Mm => 1e3,
+            LengthUnit::Cm => 1e2,
+            LengthUnit::M => 1.0,
+        }
+    }
+    /// Factor from mm (the mesh's unit) to the deck's length unit.
+    pub fn length_from_mm(self) -> f64 {
+        self.length.from_mm()
+    }
+    /// A stress in Pa in deck units.
+    pub fn stress(self, pa: f64) -> f64 {
+        pa / self.per_metre().powi(2)
+    }
+    /// A density in kg/m^3 in deck units.
+    pub fn density(self, kg_m3: f64) -> f64 {
+        kg_m3 / self.per_metre().powi(4)
+    }
+    /// A dynamic viscosity in Pa s in deck units.
+    pub fn viscosity(self, pa_s: f64) -> f64 {
+        pa_s / self.per_metre().powi(2)
+    }
+    /// A velocity in m/s in deck units.
+    pub fn velocity(self, m_s: f64) -> f64 {
+        m_s * self.per_metre()
+    }
+    fn mass_name(self) -> &'static str {
+        match self.length {
+            LengthUnit::Um => "1e6 kg",
+            LengthUnit::Mm => "tonne",
+            LengthUnit::Cm => "100 kg",
+            LengthUnit::M => "kg",
+        }
+    }
+    fn stress_name(self) -> &'static str {
+        match self.length {
+            LengthUnit::Um => "1e12 Pa",
+            LengthUnit::Mm => "MPa",
+            LengthUnit::Cm => "1e4 Pa",
+            LengthUnit::M => "Pa",
+        }
+    }
+    /// One line stating the system, for the deck's header comment.
+    pub fn describe(self) -> String {
+        let (l, m, s) = (self.length.name(), self.mass_name(), self.stress_name());
+        format!(
+            "Units: length {l}, time s, force N, mass {m}, stress {s}; density {m}/{l}^3, viscosity {s} s, velocity {l}/s."
+        )
+    }
+}
+
+// ------------------------------------------------------------------------------------------------
+// Templates and XML text
+// ------------------------------------------------------------------------------------------------
+
+/// Fills the `{{name}}` placeholders of `template` (called `label` in messages) with `values`.
+/// Values are XML-escaped. A placeholder without a value, a value without a placeholder and an
+/// unclosed `{{` are errors, so a template and its writer cannot drift apart silently.
+pub fn fill_template(label: &str, template: &str, values: &[(&str, String)]) -> Result<String> {
+    let mut out = String::with_capacity(template.len() + 64);
+    let mut used = vec![false; values.len()];
+    let mut rest = template;
+    while let Some(start) = rest.find("{{") {
+        out.push_str(&rest[..start]);
+        let after = &rest[start + 2..];
+        let end = after
+            .find("}}")
+            .ok_or_else(|| Error::Config(format!("template {label}: unclosed '{{{{' placeholder")))?;
+        let key = after[..end].trim();
+        let i = values
+            .iter()
+            .position(|(k, _)| *k == key)
+            .ok_or_else(|| Error::Config(format!("template {label}: unknown placeholder '{{{{{key}}}}}'")))?;
+        used[i] = true;
+        out.push_str(&quick_xml::escape::escape(values[i].1.as_str()));
+        rest = &after[end + 2..];
+    }
+    out.push_str(rest);
+    if let Some(i) = used.iter().position(|u| !u) {
+        return Err(Error::Config(format!("template {label}: no placeholder for value '{}'", values[i].0)));
+    }
+    Ok(out)
+}
+
+/// A number as FEBio reads it back exactly: the shortest representation that round-trips (17
+/// significant digits at most), in exponent form only for very small or very large magnitudes.
+pub fn num(x: f64) -> String {
+    let a = x.abs();
+    if x == 0.0 {
+        "0".into()
+    } else if (1e-4..1e15).contains(&a) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
+/// A material constant, load or time: [`num`] of the value rounded to 12 significant digits, so
+/// unit conversions print as 0.0023632 rather than 0.0023631999999999998 (coordinates and axes
+/// keep every digit).
+pub fn param(x: f64) -> String {
+    match format!("{x:.11e}").parse::<f64>() {
+        Ok(r) if x.is_finite() => num(r),
+        _ => num(x),
+    }
+}
+
+/// Indented XML text with escaped attributes and text.
+struct Xml {
+    out: String,
+    depth: usize,
+}
+
+impl Xml {
+    fn new() -> Self {
+        Xml { out: String::with_capacity(1 << 20), depth: 0 }
+    }
+    fn indent(&mut self) {
+        for _ in 0..self.depth {
+            self.out.push_str("  ");
+        }
+    }
+    fn tag_start(&mut self, tag: &str, attrs: &[(&str, &str)]) {
+        self.indent();
+        self.out.push('<');
+        self.out.push_str(tag);
+        for (k, v) in attrs {
+            let _ = write!(self.out, " {k}=\"{}\"", quick_xml::escape::escape(*v));
+        }
+    }
+    fn open(&mut self, tag: &str, attrs: &[(&str, &str)]) {
+        self.tag_start(tag, attrs);
+        self.out.push_str(">\n");
+        self.depth += 1;
+    }
+    fn close(&mut self, tag: &str) {
+        self.depth -= 1;
+        self.indent();
+        let _ = writeln!(self.out, "</{tag}>");
+    }
+    fn empty(&mut self, tag: &str, attrs: &[(&str, &str)]) {
+        self.tag_start(tag, attrs);
+        self.out.push_str("/>\n");
+    }
+    /// `<tag attrs>text</tag>`; `text` is escaped.
+    fn leaf(&mut self, tag: &str, attrs: &[(&str, &str)], text: &str) {
+        self.tag_start(tag, attrs);
+        let _ = writeln!(self.out, ">{}</{tag}>", quick_xml::escape::escape(text));
+    }
+    /// A comment; `--` is not allowed inside XML comments and is replaced.
+    fn comment(&mut self, lines: &[String]) {
+        self.indent();
+        self.out.push_str("<!--\n");
+        for l in lines {
+            self.indent();
+            let _ = writeln!(self.out, "  {}", l.replace("--", "- -"));
+        }
+        self.indent();
+        self.out.push_str("-->\n");
+    }
+    /// A filled template, each line indented to the current depth.
+    fn fragment(&mut self, text: &str) {
+        for line in text.lines() {
+            self.indent();
+            self.out.push_str(line);
+            self.out.push('\n');
+        }
+    }
+}
+
+fn comma_list(ids: impl Iterator<Item = u32>) -> String {
+    let mut s = String::new();
+    for (i, id) in ids.enumerate() {
+        if i > 0 {
+            s.push(',');
+        }
+        let _ = write!(s, "{id}");
+    }
+    s
+}
+
+fn vec_text(v: &nalgebra::Vector3<f64>) -> String {
+    format!("{},{},{}", num(v.x), num(v.y), num(v.z))
+}
+
+// ------------------------------------------------------------------------------------------------
+// Deck pieces shared by both decks
+// ------------------------------------------------------------------------------------------------
+
+fn header(xml: &mut Xml, lines: &[String], module: &str) {
+    xml.out.push_str("<?xml version=\"1.0\" encoding=\"ISO-8859-1\"?>\n");
+    xml.comment(lines);
+    xml.open("febio_spec", &[("version", "4.0")]);
+    xml.empty("Module", &[("type", module)]);
+}
+
+fn control(xml: &mut Xml, template: (&str, &str), time_steps: usize, step_size: f64, dtmin: f64) -> Result<()> {
+    let text = fill_template(
+        template.0,
+        template.1,
+        &[("time_steps", time_steps.to_string()), ("step_size", param(step_size)), ("dtmin", param(dtmin))],
+    )?;
+    xml.fragment(&text);
+    Ok(())
+}
+
+/// The HGO constants of a wall region.
+fn hgo_of(cfg: &FebioConfig, region: Region) -> &HgoConstants {
+    match region {
+        Region::Intima => &cfg.intima,
+        Region::Media => &cfg.media,
+        _ => &cfg.adventitia,
+    }
+}
+
+/// One `Holzapfel-Gasser-Ogden` material per wall layer, ids from `first_id`, named as the layer.
+fn wall_materials(xml: &mut Xml, mesh: &VesselMesh, cfg: &FebioConfig, u: DeckUnits, first_id: usize) -> Result<()> {
+    for (i, region) in Region::WALL.into_iter().enumerate() {
+        let layer = mesh.layers.iter().find(|l| l.region == region).ok_or_else(|| {
+            Error::Geometry(format!("FEBio: the mesh has no {} layer (its fibre angle is needed)", region.name()))
+        })?;
+        let h = hgo_of(cfg, region);
+        let text = fill_template(
+            TEMPLATE_HGO.0,
+            TEMPLATE_HGO.1,
+            &[
+                ("id", (first_id + i).to_string()),
+                ("name", region.name().to_string()),
+                ("density", param(u.density(h.density_kg_m3))),
+                ("c", param(u.stress(h.c_kpa * 1e3))),
+                ("k1", param(u.stress(h.k1_kpa * 1e3))),
+                ("k2", param(h.k2)),
+                ("kappa", param(h.kappa)),
+                ("gamma", param(layer.fibre_angle_deg)),
+                ("k", param(u.stress(h.bulk_kpa * 1e3))),
+            ],
+        )?;
+        xml.fragment(&text);
+    }
+    Ok(())
+}
+
+/// `<Nodes>` with the given (sorted) node indices, labelled index + 1.
+fn nodes(xml: &mut Xml, mesh: &VesselMesh, name: &str, which: &[u32], u: DeckUnits) {
+    let s = u.length_from_mm();
+    xml.open("Nodes", &[("name", name)]);
+    for &n in which {
+        let p = mesh.nodes[n as usize];
+        xml.indent();
+        let _ = writeln!(xml.out, "<node id=\"{}\">{},{},{}</node>", n + 1, num(p.x * s), num(p.y * s), num(p.z * s));
+    }
+    xml.close("Nodes");
+}
+
+/// `<Elements type="hex8">` of one region, named as the region, labelled index + 1.
+fn elements(xml: &mut Xml, mesh: &VesselMesh, region: Region) {
+    xml.open("Elements", &[("type", "hex8"), ("name", region.name())]);
+    for e in mesh.region_range(region) {
+        xml.indent();
+        let _ = writeln!(xml.out, "<elem id=\"{}\">{}</elem>", e + 1, comma_list(mesh.hexes[e].iter().map(|n| n + 1)));
+    }
+    xml.close("Elements");
+}
+
+fn node_set(xml: &mut Xml, name: &str, nodes: &[u32]) {
+    xml.leaf("NodeSet", &[("name", name)], &comma_list(nodes.iter().map(|n| n + 1)));
+}
+
+/// `<Surface>` of quad4 facets, each wound outward from its element.
+fn surface(xml: &mut Xml, mesh: &VesselMesh, name: &str, faces: &[ElementFace]) {
+    xml.open("Surface", &[("name", name)]);
+    for (i, f) in faces.iter().enumerate() {
+        let q = face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
+        xml.indent();
+        let _ = writeln!(xml.out, "<quad4 id=\"{}\">{}</quad4>", i + 1, comma_list(q.iter().map(|n| n + 1)));
+    }
+    xml.close("Surface");
+}
+
+fn mesh_domains(xml: &mut Xml, domains: &[(&str, &str)]) {
+    xml.open("MeshDomains", &[]);
+    for (name, mat) in domains {
+        xml.empty("SolidDomain", &[("name", name), ("mat", mat)]);
+    }
+    xml.close("MeshDomains");
+}
+
+/// `<MeshData>` with one `mat_axis` map per wall layer: `a` = e_circ, `d` = e_long of every
+/// element, `lid` = 1-based position in the layer's element set.
+fn mat_axes(xml: &mut Xml, mesh: &VesselMesh) {
+    xml.open("MeshData", &[]);
+    for region in Region::WALL {
+        xml.open("ElementData", &[("type", "mat_axis"), ("elem_set", region.name())]);
+        for (lid, e) in mesh.region_range(region).enumerate() {
+            let t = &mesh.triads[e];
+            xml.indent();
+            let _ =
+                writeln!(xml.out, "<elem lid=\"{}\"><a>{}</a><d>{}</d></elem>", lid + 1, vec_text(&t.e_circ), vec_text(&t.e_long));
+        }
+        xml.close("ElementData");
+    }
+    xml.close("MeshData");
+}
+
+/// `zero displacement` on the dofs marked in `dofs` (x, y, z) of a node set.
+fn zero_displacement(xml: &mut Xml, name: &str, set: &str, dofs: [bool; 3]) {
+    xml.open("bc", &[("name", name), ("node_set", set), ("type", "zero displacement")]);
+    for (tag, on) in ["x_dof", "y_dof", "z_dof"].iter().zip(dofs) {
+        xml.leaf(tag, &[], if on { "1" } else { "0" });
+    }
+    xml.close("bc");
+}
+
+fn load_curve(xml: &mut Xml, id: usize, name: &str, interpolate: &str, points: &[(f64, f64)]) {
+    xml.open("load_controller", &[("id", &id.to_string()), ("name", name), ("type", "loadcurve")]);
+    xml.leaf("interpolate", &[], interpolate);
+    xml.leaf("extend", &[], "CONSTANT");
+    xml.open("points", &[]);
+    for (t, v) in points {
+        xml.leaf("pt", &[], &format!("{},{}", param(*t), param(*v)));
+    }
+    xml.close("points");
+    xml.close("load_controller");
+}
+
+fn output(xml: &mut Xml, log_node_set: &str, vars: &[&str]) {
+    xml.open("Output", &[]);
+    xml.open("logfile", &[]);
+    xml.empty("node_data", &[("data", "ux;uy;uz"), ("delim", ","), ("node_set", log_node_set)]);
+    xml.close("logfile");
+    xml.open("plotfile", &[("type", "febio")]);
+    for v in vars {
+        xml.empty("var", &[("type", v)]);
+    }
+    xml.close("plotfile");
+    xml.close("Output");
+}
+
+fn node_set_of<'a>(mesh: &'a VesselMesh, name: &str) -> Result<&'a [u32]> {
+    mesh.node_sets
+        .get(name)
+        .map(|v| v.as_slice())
+        .ok_or_else(|| Error::Geometry(format!("FEBio: the mesh has no node set '{name}'")))
+}
+
+fn face_set_of<'a>(mesh: &'a VesselMesh, name: &str) -> Result<&'a [ElementFace]> {
+    mesh.face_sets
+        .get(name)
+        .map(|v| v.as_slice())
+        .ok_or_else(|| Error::Geometry(format!("FEBio: the mesh has no face set '{name}'")))
+}
+
+fn check_triads(mesh: &VesselMesh) -> Result<()> {
+    if mesh.triads.len() != mesh.hexes.len() {
+        return Err(Error::Geometry("FEBio: the mesh is not annotated (no per-element triads)".into()));
+    }
+    Ok(())
+}
+
+// ------------------------------------------------------------------------------------------------
+// End supports of the wall deck
+// ------------------------------------------------------------------------------------------------
+
+/// How the wall deck holds one end ring.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EndSupport {
+    /// End name (`inlet`, `outlet`, ...); its ring is node set `wall_<end>`.
+    pub end: String,
+    /// Dofs (x, y, z) held on the whole ring: the axial one when the end's normal is a global
+    /// axis, all three otherwise.
+    pub ring_dofs: [bool; 3],
+    /// For an axially held ring: the ring nodes on the two planes through the end's centre that
+    /// contain the axis, by the dof they hold (nodes on the plane x = x_c hold u_x, ...). Together
+    /// they remove the in-plane translations and the rotation about the axis without opposing a
+    /// symmetric inflation (as the verified example does on its symmetry lines).
+    pub plane_nodes: [Vec<u32>; 3],
+}
+
+/// The supports of every end. A ring is held axially only when its end normal is a global axis
+/// and its ring has nodes on both symmetry planes, on both sides of the centre; otherwise it is
+/// clamped (x, y and z), which also removes the rigid modes.
+pub fn end_supports(mesh: &VesselMesh) -> Result<Vec<EndSupport>> {
+    let mut out = Vec::new();
+    for end in &mesh.ends {
+        let ring = node_set_of(mesh, &sets::wall_end(&end.name))?;
+        let n = end.outward_normal;
+        let axis = (0..3).max_by(|a, b| n[*a].abs().total_cmp(&n[*b].abs())).unwrap_or(2);
+        let mut support = EndSupport { end: end.name.clone(), ring_dofs: [true; 3], plane_nodes: Default::default() };
+        if n[axis].abs() >= 1.0 - 1e-9 {
+            let size = ring.iter().map(|&i| (mesh.nodes[i as usize] - end.centre).norm()).fold(0.0, f64::max);
+            let tol = 1e-6 * size;
+            let mut planes: [Vec<u32>; 3] = Default::default();
+            let mut complete = true;
+            for k in (0..3).filter(|k| *k != axis) {
+                let on_plane: Vec<u32> =
+                    ring.iter().copied().filter(|&i| (mesh.nodes[i as usize][k] - end.centre[k]).abs() <= tol).collect();
+                // the other transverse coordinate must take both signs (a line through the axis)
+                let j = 3 - axis - k;
+                let side = |sign: f64| on_plane.iter().any(|&i| sign * (mesh.nodes[i as usize][j] - end.centre[j]) > tol);
+                complete &= side(1.0) && side(-1.0);
+                planes[k] = on_plane;
+            }
+            if complete {
+                support.ring_dofs = [false; 3];
+                support.ring_dofs[axis] = true;
+                support.plane_nodes = planes;
+            }
+        }
+        out.push(support);
+    }
+    Ok(out)
+}
+
+// ------------------------------------------------------------------------------------------------
+// The decks
+// ------------------------------------------------------------------------------------------------
+
+const DOF_NAMES: [&str; 3] = ["x", "y", "z"];
+
+/// The text of `wall.feb`.
+pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
+    let cfg = &options.febio;
+    cfg.validate()?;
+    check_triads(mesh)?;
+    let u = DeckUnits { length: options.length_unit };
+    let supports = end_supports(mesh)?;
+    let pressure = u.stress(cfg.lumen_pressure_mmhg * MMHG_PA);
+
+    let mut comment = vec![
+        format!("vesselhex {}: FEBio 4.0 deck of the artery wall (intima, media, adventitia).", env!("CARGO_PKG_VERSION")),
+        u.describe(),
+        "Holzapfel-Gasser-Ogden per layer; per-element mat_axis a = e_circ, d = e_long (element centroid frame),"
+            .into(),
+        "so the two fibre families lie at +-gamma from the circumferential direction.".into(),
+        format!(
+            "Static lumen pressure on surface {} ramped linearly to {} ({} mmHg) over {} steps.",
+            sets::WALL_LUMEN_FACES,
+            param(pressure),
+            param(cfg.lumen_pressure_mmhg),
+            cfg.static_steps
+        ),
+        "Node id = vesselhex node index + 1, element id = element index + 1 (the same labels in every deck);".into(),
+        "only the nodes of wall elements are written.".into(),
+    ];
+    for s in &supports {
+        let held: Vec<&str> = (0..3).filter(|k| s.ring_dofs[*k]).map(|k| DOF_NAMES[k]).collect();
+        if held.len() == 1 {
+            comment.push(format!(
+                "End {}: ring held axially (u_{} = 0); ring nodes on its symmetry lines hold the transverse dof.",
+                s.end, held[0]
+            ));
+        } else {
+            comment.push(format!("End {}: ring clamped (its normal is not a global axis or no symmetry lines).", s.end));
+        }
+    }
+    let wall_nodes = mesh.nodes_of(mesh.wall_range());
+    let mut rigid: [Vec<u32>; 3] = Default::default();
+    for s in &supports {
+        for (r, p) in rigid.iter_mut().zip(&s.plane_nodes) {
+            r.extend_from_slice(p);
+        }
+    }
+    for r in &mut rigid {
+        r.sort_unstable();
+        r.dedup();
+    }
+
+    let mut xml = Xml::new();
+    header(&mut xml, &comment, "solid");
+    let steps = cfg.static_steps;
+    control(&mut xml, TEMPLATE_CONTROL_STATIC, steps, 1.0 / steps as f64, 1e-3 / steps as f64)?;
+    xml.open("Material", &[]);
+    wall_materials(&mut xml, mesh, cfg, u, 1)?;
+    xml.close("Material");
+
+    xml.open("Mesh", &[]);
+    nodes(&mut xml, mesh, "wall_nodes", &wall_nodes, u);
+    for region in Region::WALL {
+        elements(&mut xml, mesh, region);
+    }
+    for s in &supports {
+        let name = sets::wall_end(&s.end);
+        node_set(&mut xml, &name, node_set_of(mesh, &name)?);
+    }
+    for (r, dof) in rigid.iter().zip(DOF_NAMES) {
+        if !r.is_empty() {
+            node_set(&mut xml, &format!("rigid_{dof}"), r);
+        }
+    }
+    node_set(&mut xml, sets::INTERFACE_NODES, node_set_of(mesh, sets::INTERFACE_NODES)?);
+    for name in [sets::WALL_LUMEN_FACES, sets::WALL_OUTER_FACES] {
+        surface(&mut xml, mesh, name, face_set_of(mesh, name)?);
+    }
+    xml.close("Mesh");
+
+    let domains: Vec<(&str, &str)> = Region::WALL.iter().map(|r| (r.name(), r.name())).collect();
+    mesh_domains(&mut xml, &domains);
+    mat_axes(&mut xml, mesh);
+
+    xml.open("Boundary", &[]);
+    for s in &supports {
+        zero_displacement(&mut xml, &format!("hold_{}", s.end), &sets::wall_end(&s.end), s.ring_dofs);
+    }
+    for (k, (r, dof)) in rigid.iter().zip(DOF_NAMES).enumerate() {
+        if !r.is_empty() {
+            let mut dofs = [false; 3];
+            dofs[k] = true;
+            zero_displacement(&mut xml, &format!("no_rigid_{dof}"), &format!("rigid_{dof}"), dofs);
+        }
+    }
+    xml.close("Boundary");
+
+    xml.open("Loads", &[]);
+    xml.open("surface_load", &[("name", "lumen_pressure"), ("surface", sets::WALL_LUMEN_FACES), ("type", "pressure")]);
+    xml.leaf("pressure", &[("lc", "1")], &param(pressure));
+    xml.leaf("symmetric_stiffness", &[], "1");
+    xml.leaf("linear", &[], "0");
+    xml.close("surface_load");
+    xml.close("Loads");
+
+    xml.open("LoadData", &[]);
+    load_curve(&mut xml, 1, "pressure_ramp", "LINEAR", &[(0.0, 0.0), (1.0, 1.0)]);
+    xml.close("LoadData");
+
+    output(&mut xml, sets::INTERFACE_NODES, &["displacement", "stress"]);
+    xml.close("febio_spec");
+    Ok(xml.out)
+}
+
+/// The text of `fsi.feb`.
+pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
+    let cfg = &options.febio;
+    cfg.validate()?;
+    check_triads(mesh)?;
+    let u = DeckUnits { length: options.length_unit };
+    let f = &cfg.fsi;
+    let b = &cfg.blood;
+    let inlet = mesh.inlet().ok_or_else(|| Error::Geometry("FEBio FSI: the mesh has no inlet".into()))?;
+    let outlets: Vec<_> = mesh.outlets().collect();
+    if outlets.is_empty() {
+        return Err(Error::Geometry("FEBio FSI: the mesh has no outlet".into()));
+    }
+    let velocity = u.velocity(f.inlet_mean_velocity_m_s);
+    let p_out = u.stress(f.outlet_pressure_mmhg * MMHG_PA);
+    let interface = node_set_of(mesh, sets::INTERFACE_NODES)?;
+    let on_interface = {
+        let mut v = vec![false; mesh.nodes.len()];
+        for &n in interface {
+            v[n as usize] = true;
+        }
+        v
+    };
+
+    let comment = vec![
+        format!(
+            "vesselhex {}: FEBio 4.0 monolithic fluid-structure deck (Module fluid-FSI).",
+            env!("CARGO_PKG_VERSION")
+        ),
+        u.describe(),
+        format!(
+            "Lumen: one fluid-FSI domain (blood: density {} kg/m^3, bulk modulus {} Pa, Newtonian viscosity {} Pa s;",
+            param(b.density_kg_m3),
+            param(b.bulk_modulus_pa),
+            param(b.viscosity_pa_s)
+        ),
+        "a negligible neo-Hookean solid moves the mesh). Wall: intima, media, adventitia as solid domains".into(),
+        "(Holzapfel-Gasser-Ogden, per-element mat_axis a = e_circ, d = e_long) sharing the interface nodes.".into(),
+        format!(
+            "fluid-FSI traction on surface {} and no-slip (zero fluid velocity) on node set {}.",
+            sets::LUMEN_WALL_FACES,
+            sets::INTERFACE_NODES
+        ),
+        format!(
+            "Inlet: parabolic fluid normal velocity, mean {} m/s; outlets: fluid pressure {} mmHg with backflow",
+            param(f.inlet_mean_velocity_m_s),
+            param(f.outlet_pressure_mmhg)
+        ),
+        format!(
+            "stabilization (beta {}). Loads ramp linearly over {} s; dynamic run of {} steps of {} s.",
+            param(f.backflow_beta),
+            param(f.ramp_s),
+            f.time_steps,
+            param(f.step_size_s)
+        ),
+        "Wall end rings and lumen end faces are fixed in x, y and z (mesh motion).".into(),
+        "The fluid-FSI system is non-symmetric: run with a non-symmetric linear solver (pardiso, the default".into(),
+        "of MKL builds); skyline cannot factor it.".into(),
+        "Node id = vesselhex node index + 1, element id = element index + 1 (the same labels in every deck).".into(),
+    ];
+
+    let mut xml = Xml::new();
+    header(&mut xml, &comment, "fluid-FSI");
+    control(&mut xml, TEMPLATE_CONTROL_FSI, f.time_steps, f.step_size_s, f.step_size_s * 1e-2)?;
+    xml.open("Material", &[]);
+    let blood = fill_template(
+        TEMPLATE_BLOOD.0,
+        TEMPLATE_BLOOD.1,
+        &[
+            ("id", "1".into()),
+            ("name", "blood".into()),
+            ("mesh_motion_modulus", param(u.stress(1e-3))),
+            ("density", param(u.density(b.density_kg_m3))),
+            ("bulk_modulus", param(u.stress(b.bulk_modulus_pa))),
+            ("viscosity", param(u.viscosity(b.viscosity_pa_s))),
+        ],
+    )?;
+    xml.fragment(&blood);
+    wall_materials(&mut xml, mesh, cfg, u, 2)?;
+    xml.close("Material");
+
+    xml.open("Mesh", &[]);
+    let all: Vec<u32> = (0..mesh.nodes.len() as u32).collect();
+    nodes(&mut xml, mesh, "all_nodes", &all, u);
+    for region in Region::ALL {
+        elements(&mut xml, mesh, region);
+    }
+    let mut lumen_inner_sets = Vec::new();
+    for end in &mesh.ends {
+        let wall = sets::wall_end(&end.name);
+        node_set(&mut xml, &wall, node_set_of(mesh, &wall)?);
+        let inner: Vec<u32> = node_set_of(mesh, &sets::lumen_end(&end.name))?
+            .iter()
+            .copied()
+            .filter(|&n| !on_interface[n as usize])
+            .collect();
+        let name = format!("{}_inner", sets::lumen_end(&end.name));
+        node_set(&mut xml, &name, &inner);
+        lumen_inner_sets.push((end.name.clone(), name));
+    }
+    node_set(&mut xml, sets::INTERFACE_NODES, interface);
+    surface(&mut xml, mesh, sets::LUMEN_WALL_FACES, face_set_of(mesh, sets::LUMEN_WALL_FACES)?);
+    for end in &mesh.ends {
+        let name = sets::lumen_end(&end.name);
+        surface(&mut xml, mesh, &name, face_set_of(mesh, &name)?);
+    }
+    xml.close("Mesh");
+
+    let mut domains: Vec<(&str, &str)> = vec![(Region::Lumen.name(), "blood")];
+    domains.extend(Region::WALL.iter().map(|r| (r.name(), r.name())));
+    mesh_domains(&mut xml, &domains);
+    mat_axes(&mut xml, mesh);
+
+    xml.open("Boundary", &[]);
+    for end in &mesh.ends {
+        zero_displacement(&mut xml, &format!("fix_wall_{}", end.name), &sets::wall_end(&end.name), [true; 3]);
+    }
+    for (end, set) in &lumen_inner_sets {
+        zero_displacement(&mut xml, &format!("fix_lumen_{end}"), set, [true; 3]);
+    }
+    xml.open("bc", &[("name", "no_slip"), ("node_set", sets::INTERFACE_NODES), ("type", "zero fluid velocity")]);
+    for tag in ["wx_dof", "wy_dof", "wz_dof"] {
+        xml.leaf(tag, &[], "1");
+    }
+    xml.close("bc");
+    for end in &outlets {
+        let surf = sets::lumen_end(&end.name);
+        xml.open("bc", &[("name", &format!("pressure_{}", end.name)), ("surface", &surf), ("type", "fluid pressure")]);
+        xml.leaf("pressure", &[("lc", "2")], &param(p_out));
+        xml.close("bc");
+    }
+    xml.close("Boundary");
+
+    xml.open("Loads", &[]);
+    xml.open("surface_load", &[("name", "fsi_traction"), ("surface", sets::LUMEN_WALL_FACES), ("type", "fluid-FSI traction")]);
+    xml.leaf("shell_bottom", &[], "0");
+    xml.close("surface_load");
+    let inlet_surface = sets::lumen_end(&inlet.name);
+    xml.open(
+        "surface_load",
+        &[("name", &format!("velocity_{}", inlet.name)), ("surface", &inlet_surface), ("type", "fluid normal velocity")],
+    );
+    // measured along the facets' outward normal: inflow is negative
+    xml.leaf("velocity", &[("lc", "1")], &param(-velocity));
+    xml.leaf("prescribe_nodal_velocities", &[], "1");
+    xml.leaf("parabolic", &[], "1");
+    xml.leaf("prescribe_rim_pressure", &[], "1");
+    xml.close("surface_load");
+    for end in &outlets {
+        let surf = sets::lumen_end(&end.name);
+        xml.open(
+            "surface_load",
+            &[("name", &format!("backflow_{}", end.name)), ("surface", &surf), ("type", "fluid backflow stabilization")],
+        );
+        xml.leaf("beta", &[("lc", "3")], &param(f.backflow_beta));
+        xml.close("surface_load");
+    }
+    xml.close("Loads");
+
+    xml.open("LoadData", &[]);
+    load_curve(&mut xml, 1, "inflow_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
+    load_curve(&mut xml, 2, "outlet_pressure_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
+    load_curve(&mut xml, 3, "backflow_on", "STEP", &[(0.0, 1.0), (f.ramp_s, 1.0)]);
+    xml.close("LoadData");
+
+    output(
+        &mut xml,
+        sets::INTERFACE_NODES,
+        &[
+            "displacement",
+            "stress",
+            "velocity",
+            "fluid pressure",
+            "fluid velocity",
+            "fluid dilatation",
+            "fluid stress",
+            "nodal fluid velocity",
+            "relative fluid velocity",
+        ],
+    );
+    xml.close("febio_spec");
+    Ok(xml.out)
+}
+
+fn write_deck(dir: &Path, rel: &str, text: &str) -> Result<Vec<PathBuf>> {
+    let rel = PathBuf::from(rel);
+    let path = dir.join(&rel);
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, "cannot create the folder", e))?;
+    }
+    write_atomic(&path, |w| w.write_all(text.as_bytes()))?;
+    Ok(vec![rel])
+}
+
+/// Writer of format `febio`: `febio/wall.feb`.
+pub fn write_wall(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
+    write_deck(dir, WALL_DECK, &wall_deck(mesh, options)?)
+}
+
+/// Writer of format `febio-fsi`: `febio/fsi.feb`.
+pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
+    write_deck(dir, FSI_DECK, &fsi_deck(mesh, options)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn templates_fill_strictly() {
+        let v = |k: &'static str| (k, "1".to_string());
+        assert_eq!(fill_template("t", "<a>{{x}}</a>{{ y }}", &[v("x"), v("y")]).unwrap(), "<a>1</a>1");
+        let e = fill_template("t", "<a>{{x}}{{z}}</a>", &[v("x")]).unwrap_err().to_string();
+        assert!(e.contains("unknown placeholder") && e.contains("z"), "{e}");
+        let e = fill_template("t", "<a>{{x}}</a>", &[v("x"), v("y")]).unwrap_err().to_string();
+        assert!(e.contains("no placeholder") && e.contains("y"), "{e}");
+        assert!(fill_template("t", "<a>{{x</a>", &[v("x")]).is_err());
+        assert_eq!(fill_template("t", "{{x}}", &[("x", "a<b&c".into())]).unwrap(), "a&lt;b&amp;c");
+    }
+
+    #[test]
+    fn every_shipped_template_fills_with_its_writer_values() {
+        // the decks call fill_template with exactly these keys; a drift fails here first
+        let keys = |t: &str| -> Vec<String> {
+            t.split("{{").skip(1).map(|s| s.split("}}").next().unwrap().trim().to_string()).collect()
+        };
+        let mut hgo = keys(TEMPLATE_HGO.1);
+        hgo.sort();
+        assert_eq!(hgo, ["c", "density", "gamma", "id", "k", "k1", "k2", "kappa", "name"]);
+        for t in [TEMPLATE_CONTROL_STATIC.1, TEMPLATE_CONTROL_FSI.1] {
+            let mut k = keys(t);
+            k.sort();
+            k.dedup();
+            assert_eq!(k, ["dtmin", "step_size", "time_steps"]);
+        }
+    }
+
+    #[test]
+    fn numbers_round_trip_and_stay_readable() {
+        for x in [0.0, 1.0, -2.5, 1.0 / 3.0, 1.2246467991473532e-16, 1.06e-9, 2200.0, 13332.2387415, 1e20] {
+            let s = num(x);
+            assert_eq!(s.parse::<f64>().unwrap(), x, "{s}");
+            assert!(s.len() <= 24, "{s}");
+        }
+        assert_eq!(num(-0.0), "0");
+        assert_eq!(num(0.0133), "0.0133");
+        assert_eq!(num(1.06e-9), "1.06e-9");
+    }
+
+    #[test]
+    fn parameters_print_without_conversion_noise() {
+        assert_eq!(param(2.3632 / 1e3), "0.0023632");
+        assert_eq!(param(100.0 * MMHG_PA / 1e6), "0.0133322387415");
+        assert_eq!(param(0.1), "0.1");
+        assert_eq!(param(-100.0), "-100");
+    }
+
+    #[test]
+    fn unit_systems_are_consistent() {
+        let mm = DeckUnits { length: LengthUnit::Mm };
+        assert_eq!(mm.density(1060.0), 1.06e-9);
+        assert_eq!(mm.viscosity(3.5e-3), 3.5e-9);
+        assert_eq!(mm.stress(2.2e9), 2200.0);
+        assert_eq!(mm.stress(3e3), 0.003);
+        assert_eq!(mm.stress(1e-3), 1e-9);
+        assert_eq!(mm.velocity(0.1), 100.0);
+        let m = DeckUnits { length: LengthUnit::M };
+        assert_eq!(m.stress(13332.2), 13332.2);
+        assert_eq!(m.density(1060.0), 1060.0);
+        assert!(mm.describe().contains("tonne") && mm.describe().contains("MPa"));
+        assert!(m.describe().contains("kg") && m.describe().contains("Pa"));
+    }
+
+    #[test]
+    fn default_constants_are_valid_and_kappa_is_bounded() {
+        let mut c = FebioConfig::default();
+        c.validate().unwrap();
+        c.media.kappa = 0.34;
+        assert!(c.validate().unwrap_err().to_string().contains("kappa"));
+    }
+}
