@@ -4,6 +4,8 @@
 //! Without OpenFOAM the tests print "skipped"; with `CI=true` they fail instead. Set
 //! `VESSELHEX_KEEP=1` to keep the cases under the temporary folder.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use vesselhex::config::{MeshConfig, OpenFoamConfig, Preset};
@@ -414,49 +416,6 @@ fn poiseuille_pressure_drop_and_flow_balance() {
     cleanup(&dir);
 }
 
-/// A 60 degree bend: tube radius 2 mm bent on a 30 mm radius in the x-z plane, with its centerline.
-fn bent_tube(config: &MeshConfig) -> VesselMesh {
-    use nalgebra::{Point3, Vector3};
-    use vesselhex::input::{CenterlinePolyline, Centerlines, TriangleSurface};
-    let (r, bend, angle) = (2.0, 30.0, std::f64::consts::FRAC_PI_3);
-    let frame = |theta: f64| {
-        let p = Point3::new(bend * (1.0 - theta.cos()), 0.0, bend * theta.sin());
-        (p, Vector3::new(theta.cos(), 0.0, -theta.sin()), Vector3::y())
-    };
-    let (around, rings) = (96, 160);
-    let mut vertices = Vec::new();
-    for j in 0..=rings {
-        let (p, n, b) = frame(angle * j as f64 / rings as f64);
-        for i in 0..around {
-            let a = std::f64::consts::TAU * i as f64 / around as f64;
-            vertices.push(p + (n * a.cos() + b * a.sin()) * r);
-        }
-    }
-    let mut triangles = Vec::new();
-    for j in 0..rings {
-        for i in 0..around {
-            let a = (j * around + i) as u32;
-            let b = (j * around + (i + 1) % around) as u32;
-            let (c, d) = (a + around as u32, b + around as u32);
-            triangles.push([a, b, d]);
-            triangles.push([a, d, c]);
-        }
-    }
-    let surface = TriangleSurface { vertices, triangles, triangle_tags: None, source: "bent tube (in memory)".into() };
-    let points: Vec<Point3<f64>> = (0..=90).map(|i| frame(angle * i as f64 / 90.0).0).collect();
-    let centerlines = Centerlines {
-        polylines: vec![CenterlinePolyline {
-            radii: Some(vec![r; points.len()]),
-            points,
-            normals: None,
-            cell_tags: Default::default(),
-        }],
-        source: "bent tube centerline (in memory)".into(),
-    };
-    let mut progress = vesselhex::progress::Progress::new(true, 9);
-    vesselhex::pipeline::mesh_vessel(&surface, &centerlines, config, &mut progress).unwrap().mesh
-}
-
 /// Runs a written case's Allrun; returns the solver log and the run time.
 fn allrun(case: &Path, solver: &str) -> (String, f64) {
     let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
@@ -491,12 +450,14 @@ fn flow_imbalance(case: &Path, poly: &PolyMesh) -> f64 {
 }
 
 #[test]
-fn bent_tube_passes_checkmesh_and_its_case_converges() {
-    if !openfoam_available("bent_tube_passes_checkmesh_and_its_case_converges") {
+fn curved_fixture_passes_checkmesh_and_its_case_converges() {
+    if !openfoam_available("curved_fixture_passes_checkmesh_and_its_case_converges") {
         return;
     }
-    let mesh = bent_tube(&MeshConfig::preset(Preset::Coarse));
-    check_ascii_and_binary(&mesh, "bent-tube");
+    // fixtures/curved: a 120 degree bend on a 15 mm radius (7.5 tube radii)
+    let (stl, csv) = common::fixture("curved");
+    let mesh = common::mesh_files(&stl, &csv, &MeshConfig::preset(Preset::Coarse));
+    check_ascii_and_binary(&mesh, "curved");
     let dir = scratch("bent-run");
     let case = write(&mesh, "openfoam", &WriteOptions::default(), &dir);
     let poly = read_polymesh(&case).unwrap();
@@ -504,12 +465,12 @@ fn bent_tube_passes_checkmesh_and_its_case_converges() {
     let converged = log.lines().find(|l| l.contains("solution converged in"));
     assert!(
         converged.is_some(),
-        "simpleFoam did not converge on the bent tube:\n{}",
+        "simpleFoam did not converge on the curved fixture:\n{}",
         &log[log.len().saturating_sub(3000)..]
     );
     let imbalance = flow_imbalance(&case, &poly);
     eprintln!(
-        "bent tube: {} cells; {}; flow imbalance {imbalance:.2e}; Allrun {seconds:.1} s",
+        "curved fixture: {} cells; {}; flow imbalance {imbalance:.2e}; Allrun {seconds:.1} s",
         poly.n_cells,
         converged.unwrap().trim()
     );
@@ -539,10 +500,8 @@ fn pimplefoam_case_runs() {
 }
 
 /// The command line end to end: STL + CSV centerline in, `--formats openfoam,openfoam-fsi
-/// --foam-format binary` out. Needs the input readers, which are not on this branch (merged on
-/// main): run with `--ignored` after the merge.
+/// --foam-format binary` out.
 #[test]
-
 fn command_line_writes_binary_cases() {
     use std::fmt::Write as _;
     let dir = scratch("cli");
@@ -598,33 +557,21 @@ fn foam_format_flag_is_parsed() {
     assert!(err.contains("ascii") && err.contains("binary"), "{err}");
 }
 
-/// Time to build and write the polyMesh of a large lumen (about 800,000 hexes), ASCII and binary.
-/// Timing only: `cargo test --test openfoam -- --ignored --nocapture large`.
+/// checkMesh (ASCII and binary) on the lumen of every synthetic fixture and of the real
+/// unbranched vessels, at the coarse preset.
 #[test]
-#[ignore = "timing of a large mesh: run with --ignored"]
-fn large_lumen_write_time() {
-    let mut config = MeshConfig::preset(Preset::Fine);
-    config.lumen.axial_spacing_mm = Some(0.02);
-    let t = std::time::Instant::now();
-    let mesh = tube(&config);
-    let meshing = t.elapsed().as_secs_f64();
-    let dir = scratch("large");
-    for binary in [false, true] {
-        let t = std::time::Instant::now();
-        let poly = openfoam::lumen_polymesh(&mesh).unwrap();
-        let build = t.elapsed().as_secs_f64();
-        let files = openfoam::write_polymesh(&poly, binary, &dir.join(binary.to_string())).unwrap();
-        let total = t.elapsed().as_secs_f64();
-        let bytes: u64 =
-            files.iter().map(|f| std::fs::metadata(dir.join(binary.to_string()).join(f)).unwrap().len()).sum();
-        eprintln!(
-            "large lumen: {} hexes (meshed in {meshing:.1} s); {}: faces built in {build:.2} s, written in {:.2} s \
-             ({:.0} MB)",
-            poly.n_cells,
-            if binary { "binary" } else { "ascii" },
-            total - build,
-            bytes as f64 / 1e6
-        );
+fn checkmesh_accepts_every_fixture_and_the_real_unbranched_vessels() {
+    if !openfoam_available("checkmesh_accepts_every_fixture_and_the_real_unbranched_vessels") {
+        return;
     }
-    cleanup(&dir);
+    let config = MeshConfig::preset(Preset::Coarse);
+    for name in ["straight", "curved", "tapered", "helical", "aaa"] {
+        let (stl, csv) = common::fixture(name);
+        let mesh = common::mesh_files(&stl, &csv, &config);
+        check_ascii_and_binary(&mesh, name);
+    }
+    let Some(vessels) = common::vessels_dir() else { return };
+    for (name, mesh) in common::real_unbranched_meshes(&vessels, &config) {
+        check_ascii_and_binary(&mesh, name);
+    }
 }

@@ -3,53 +3,13 @@
 
 mod common;
 
-use indexmap::IndexMap;
-use nalgebra::{Matrix3, Point3, Vector3};
+use nalgebra::{Point3, Vector3};
 use vesselhex::config::{MeshConfig, Preset};
-use vesselhex::input::{read_centerlines, read_surface, CenterlinePolyline, Centerlines, TriangleSurface};
+use vesselhex::input::{read_centerlines, read_surface, Centerlines, TriangleSurface};
 use vesselhex::mesh::Region;
 use vesselhex::pipeline::{mesh_vessel, Meshed};
 use vesselhex::progress::Progress;
-use vesselhex::surface::LumenSurface;
 use vesselhex::units::LengthUnit;
-
-/// A centerline for a nearly straight vessel without one (vmtk_abdominal_aorta_segment): the
-/// principal axis of the vertices, sliced every `step` mm; each slice's vertex centroid is a
-/// centerline point and its distance to the surface the inscribed radius.
-fn derive_straight_centerline(surface: &TriangleSurface, step: f64) -> Centerlines {
-    let n = surface.vertices.len() as f64;
-    let mean = surface.vertices.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
-    let cov = surface.vertices.iter().fold(Matrix3::zeros(), |a, p| {
-        let d = p.coords - mean;
-        a + d * d.transpose()
-    }) / n;
-    let eig = cov.symmetric_eigen();
-    let k = eig.eigenvalues.imax();
-    let axis: Vector3<f64> = eig.eigenvectors.column(k).into();
-    let t: Vec<f64> = surface.vertices.iter().map(|p| (p.coords - mean).dot(&axis)).collect();
-    let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
-    let bins = ((hi - lo) / step).ceil() as usize;
-    let mut sums = vec![(Vector3::zeros(), 0usize); bins];
-    for (p, &x) in surface.vertices.iter().zip(&t) {
-        let b = (((x - lo) / step) as usize).min(bins - 1);
-        sums[b].0 += p.coords;
-        sums[b].1 += 1;
-    }
-    let index = LumenSurface::new(surface).unwrap();
-    let mut points = vec![];
-    let mut radii = vec![];
-    for (sum, count) in sums {
-        if count >= 20 {
-            let c = Point3::from(sum / count as f64);
-            radii.push(index.closest(&c).distance);
-            points.push(c);
-        }
-    }
-    Centerlines {
-        polylines: vec![CenterlinePolyline { points, radii: Some(radii), normals: None, cell_tags: IndexMap::new() }],
-        source: "derived centerline".into(),
-    }
-}
 
 fn check(name: &str, surface: &TriangleSurface, centerlines: &Centerlines) {
     for preset in [Preset::Coarse, Preset::Medium] {
@@ -102,6 +62,6 @@ fn vmtk_abdominal_aorta_segment_with_a_derived_centerline() {
     let Some(dir) = common::vessels_dir() else { return };
     let surface =
         read_surface(&dir.join("vmtk_abdominal_aorta_segment/aorta-surface-segment-2.stl"), LengthUnit::Mm).unwrap();
-    let cl = derive_straight_centerline(&surface, 2.0);
+    let cl = common::derive_straight_centerline(&surface, 2.0);
     check("vmtk_abdominal_aorta_segment", &surface, &cl);
 }

@@ -1,7 +1,15 @@
 //! Shared helpers of the integration tests.
 #![allow(dead_code)]
 
+use indexmap::IndexMap;
+use nalgebra::{Matrix3, Point3, Vector3};
 use std::path::{Path, PathBuf};
+use vesselhex::config::MeshConfig;
+use vesselhex::input::{read_centerlines, read_surface, CenterlinePolyline, Centerlines, TriangleSurface};
+use vesselhex::mesh::VesselMesh;
+use vesselhex::progress::Progress;
+use vesselhex::surface::LumenSurface;
+use vesselhex::units::LengthUnit;
 use std::process::{Command, Output};
 
 pub fn crate_dir() -> PathBuf {
@@ -86,4 +94,63 @@ pub fn files_under(dir: &Path) -> Vec<PathBuf> {
         }
     }
     out
+}
+
+/// A centerline for a nearly straight vessel without one (vmtk_abdominal_aorta_segment): the
+/// principal axis of the vertices, sliced every `step` mm; each slice's vertex centroid is a
+/// centerline point and its distance to the surface the inscribed radius.
+pub fn derive_straight_centerline(surface: &TriangleSurface, step: f64) -> Centerlines {
+    let n = surface.vertices.len() as f64;
+    let mean = surface.vertices.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
+    let cov = surface.vertices.iter().fold(Matrix3::zeros(), |a, p| {
+        let d = p.coords - mean;
+        a + d * d.transpose()
+    }) / n;
+    let eig = cov.symmetric_eigen();
+    let k = eig.eigenvalues.imax();
+    let axis: Vector3<f64> = eig.eigenvectors.column(k).into();
+    let t: Vec<f64> = surface.vertices.iter().map(|p| (p.coords - mean).dot(&axis)).collect();
+    let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+    let bins = ((hi - lo) / step).ceil() as usize;
+    let mut sums = vec![(Vector3::zeros(), 0usize); bins];
+    for (p, &x) in surface.vertices.iter().zip(&t) {
+        let b = (((x - lo) / step) as usize).min(bins - 1);
+        sums[b].0 += p.coords;
+        sums[b].1 += 1;
+    }
+    let index = LumenSurface::new(surface).unwrap();
+    let mut points = vec![];
+    let mut radii = vec![];
+    for (sum, count) in sums {
+        if count >= 20 {
+            let c = Point3::from(sum / count as f64);
+            radii.push(index.closest(&c).distance);
+            points.push(c);
+        }
+    }
+    Centerlines {
+        polylines: vec![CenterlinePolyline { points, radii: Some(radii), normals: None, cell_tags: IndexMap::new() }],
+        source: "derived centerline".into(),
+    }
+}
+
+
+/// Meshes a surface file with a centerline file (both mm).
+pub fn mesh_files(surface: &Path, centerlines: &Path, config: &MeshConfig) -> VesselMesh {
+    let s = read_surface(surface, LengthUnit::Mm).unwrap();
+    let c = read_centerlines(centerlines, LengthUnit::Mm).unwrap();
+    vesselhex::pipeline::mesh_vessel(&s, &c, config, &mut Progress::new(true, 9))
+        .unwrap_or_else(|e| panic!("{}: {e}", surface.display()))
+        .mesh
+}
+
+/// The real unbranched vessels meshed with `config`: aneurisk_C0092 with its centerline and
+/// vmtk_abdominal_aorta_segment with a derived one.
+pub fn real_unbranched_meshes(vessels: &Path, config: &MeshConfig) -> Vec<(&'static str, VesselMesh)> {
+    let d = vessels.join("aneurisk_C0092_ica_segment");
+    let c0092 = mesh_files(&d.join("C0092_clip1_0.vtp"), &d.join("C0092_clip1_mesh1_0.95_ratio_centerline.vtp"), config);
+    let aorta = read_surface(&vessels.join("vmtk_abdominal_aorta_segment/aorta-surface-segment-2.stl"), LengthUnit::Mm).unwrap();
+    let cl = derive_straight_centerline(&aorta, 2.0);
+    let aorta = vesselhex::pipeline::mesh_vessel(&aorta, &cl, config, &mut Progress::new(true, 9)).unwrap().mesh;
+    vec![("aneurisk_C0092_ica_segment", c0092), ("vmtk_abdominal_aorta_segment", aorta)]
 }
