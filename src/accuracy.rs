@@ -75,7 +75,9 @@ pub fn surface_accuracy(
     // Input vertices inside the meshed stretch: their nearest centerline sample lies between
     // the first and last sections, and they lie between the two end planes.
     let samples: Vec<[f64; 3]> = branch.samples.iter().map(|s| [s.point.x, s.point.y, s.point.z]).collect();
-    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&samples).expect("a branch has samples");
+    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&samples).map_err(|e| {
+        crate::error::Error::Geometry(format!("cannot index the centerline of {}: {e:?}", branch.name))
+    })?;
     let first = &projected.sections[0].station;
     let last = &projected.sections[projected.sections.len() - 1].station;
     let inside: Vec<usize> = (0..surface.vertices.len())
