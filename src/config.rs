@@ -182,6 +182,9 @@ pub struct MeshConfig {
     pub centerline: CenterlineConfig,
     pub lumen: LumenConfig,
     pub wall: WallConfig,
+    /// Abaqus and CalculiX decks (`[fe]`).
+    #[serde(default)]
+    pub fe: crate::writers::inp::FeConfig,
 }
 
 impl Default for MeshConfig {
@@ -201,6 +204,7 @@ impl MeshConfig {
             centerline: CenterlineConfig::default(),
             lumen: LumenConfig::default(),
             wall: WallConfig::default(),
+            fe: Default::default(),
         };
         match preset {
             Preset::Coarse => {}

@@ -212,7 +212,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let meshed = mesh_vessel(&surface, &centerlines, config, &mut progress)?;
 
     progress.stage("writing");
-    let options = WriteOptions { length_unit: config.output_units };
+    let options = WriteOptions { length_unit: config.output_units, fe: config.fe.clone() };
     let mut outputs = Vec::new();
     for f in &formats {
         let write = writers::writer(f).expect("checked above");

@@ -7,20 +7,29 @@ use crate::mesh::VesselMesh;
 use crate::units::LengthUnit;
 use std::path::{Path, PathBuf};
 
+pub mod abaqus;
+pub mod calculix;
+pub mod inp;
 pub mod vtu;
 
 /// What every writer may need besides the mesh.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct WriteOptions {
     /// Length unit of FE outputs (OpenFOAM is always in metres).
     pub length_unit: LengthUnit,
+    /// Abaqus and CalculiX decks: elements, material template and constants, pressure.
+    pub fe: inp::FeConfig,
 }
 
 /// A writer puts its files under `dir` (a staging folder) and returns their paths relative to it.
 pub type WriterFn = fn(&VesselMesh, &WriteOptions, &Path) -> Result<Vec<PathBuf>>;
 
 /// The format table: name, what it writes, writer.
-pub const WRITERS: &[(&str, &str, WriterFn)] = &[("vtu", "mesh.vtu: VTK XML unstructured grid for ParaView", vtu::write_vtu)];
+pub const WRITERS: &[(&str, &str, WriterFn)] = &[
+    ("vtu", "mesh.vtu: VTK XML unstructured grid for ParaView", vtu::write_vtu),
+    ("abaqus", "abaqus/model.inp: Abaqus deck of the wall, HGO layers, inflation step", abaqus::write_abaqus),
+    ("calculix", "calculix/model.inp: CalculiX deck of the wall, ELASTIC_FIBER layers, inflation step", calculix::write_calculix),
+];
 
 /// The writer of a format name.
 pub fn writer(name: &str) -> Option<WriterFn> {
