@@ -289,6 +289,9 @@ pub struct MeshConfig {
     /// FEBio materials, loads and controls.
     #[serde(default)]
     pub febio: crate::writers::febio::FebioConfig,
+    /// Abaqus and CalculiX decks (`[fe]`).
+    #[serde(default)]
+    pub fe: crate::writers::inp::FeConfig,
 }
 
 impl Default for MeshConfig {
@@ -310,6 +313,7 @@ impl MeshConfig {
             wall: WallConfig::default(),
             openfoam: OpenFoamConfig::default(),
             febio: Default::default(),
+            fe: Default::default(),
         };
         match preset {
             Preset::Coarse => {}

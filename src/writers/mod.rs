@@ -7,8 +7,11 @@ use crate::mesh::VesselMesh;
 use crate::units::LengthUnit;
 use std::path::{Path, PathBuf};
 
-pub mod openfoam;
+pub mod abaqus;
+pub mod calculix;
 pub mod febio;
+pub mod inp;
+pub mod openfoam;
 pub mod vtu;
 
 /// What every writer may need besides the mesh.
@@ -20,12 +23,19 @@ pub struct WriteOptions {
     pub openfoam: crate::config::OpenFoamConfig,
     /// Materials, loads and controls of the FEBio decks (`[febio]` in the case file).
     pub febio: febio::FebioConfig,
+    /// Elements, materials and step of the Abaqus and CalculiX decks (`[fe]`).
+    pub fe: inp::FeConfig,
 }
 
 impl WriteOptions {
     /// The writers' share of a configuration.
     pub fn from_config(config: &crate::config::MeshConfig) -> Self {
-        WriteOptions { length_unit: config.output_units, openfoam: config.openfoam.clone(), febio: config.febio.clone() }
+        WriteOptions {
+            length_unit: config.output_units,
+            openfoam: config.openfoam.clone(),
+            febio: config.febio.clone(),
+            fe: config.fe.clone(),
+        }
     }
 }
 
@@ -43,6 +53,8 @@ pub const WRITERS: &[(&str, &str, WriterFn)] = &[
     ),
     ("febio", "febio/wall.feb: FEBio 4.0 wall, HGO layers with per-element fibre axes, lumen pressure", febio::write_wall),
     ("febio-fsi", "febio/fsi.feb: FEBio 4.0 monolithic fluid-FSI model of lumen and wall", febio::write_fsi),
+    ("abaqus", "abaqus/model.inp: Abaqus deck of the wall, HGO layers, inflation step", abaqus::write_abaqus),
+    ("calculix", "calculix/model.inp: CalculiX deck of the wall, ELASTIC_FIBER layers, inflation step", calculix::write_calculix),
 ];
 
 /// The writer of a format name.

@@ -1,0 +1,275 @@
+//! The CalculiX deck, solved by the real `ccx` (2.20, Debian `calculix-ccx`).
+//!
+//! Without `ccx` the solver tests print "skipped" and pass, unless `CI=true`, where they fail.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use vesselhex::config::MeshConfig;
+use vesselhex::mesh::{sets, VesselMesh};
+use vesselhex::testing::straight_tube_mesh;
+use vesselhex::writers::inp::{ElementType, MaterialModel, MMHG_IN_MPA};
+use vesselhex::writers::{calculix::write_calculix, WriteOptions};
+
+/// A straight tube r = 2 mm, 30 mm long: `around` elements around, axial elements of
+/// `axial` mm, wall `thickness` mm with `per_layer` elements in each layer.
+fn tube(around: usize, axial: f64, thickness: f64, per_layer: usize, betas: Option<[f64; 3]>) -> VesselMesh {
+    let mut c = MeshConfig::default();
+    c.lumen.core_elements = around / 4;
+    c.lumen.radial_elements = 2;
+    c.lumen.axial_spacing_mm = Some(axial);
+    c.wall.thickness_mm = Some(thickness);
+    c.wall.intima.elements = per_layer;
+    c.wall.media.elements = per_layer;
+    c.wall.adventitia.elements = per_layer;
+    if let Some(b) = betas {
+        c.wall.intima.fibre_angle_deg = b[0];
+        c.wall.media.fibre_angle_deg = b[1];
+        c.wall.adventitia.fibre_angle_deg = b[2];
+    }
+    straight_tube_mesh(&c).expect("tube meshes").mesh
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("vesselhex-ccx-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn ccx_available() -> bool {
+    let found = Command::new("ccx").arg("-v").output().is_ok();
+    if !found {
+        if std::env::var("CI").map(|v| v == "true").unwrap_or(false) {
+            panic!("ccx is not installed but CI=true: install calculix-ccx");
+        }
+        eprintln!("skipped: ccx is not installed");
+    }
+    found
+}
+
+/// What one ccx run left behind.
+struct Run {
+    dir: PathBuf,
+    log: String,
+}
+
+/// Writes the deck of `mesh` and runs ccx on it; requires `Job finished`, exit 0, no warning.
+fn solve(mesh: &VesselMesh, options: &WriteOptions, name: &str) -> Run {
+    let dir = scratch(name);
+    let files = write_calculix(mesh, options, &dir).unwrap();
+    assert_eq!(files, vec![PathBuf::from("calculix/model.inp")]);
+    let job = dir.join("calculix");
+    let started = std::time::Instant::now();
+    let out = Command::new("ccx").args(["-i", "model"]).current_dir(&job).env("OMP_NUM_THREADS", "1").output().unwrap();
+    let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let sta = std::fs::read_to_string(job.join("model.sta")).unwrap_or_default();
+    eprintln!(
+        "{name}: ccx exit {:?} in {:.1} s; {} wall elements\n{}\n{}",
+        out.status.code(),
+        started.elapsed().as_secs_f64(),
+        mesh.wall_range().len(),
+        log.lines().filter(|l| l.contains("Job finished") || l.contains("Total CalculiX Time") || l.contains("increment")).collect::<Vec<_>>().join("\n"),
+        sta
+    );
+    assert!(out.status.success(), "{name}: ccx failed:\n{log}");
+    assert!(log.contains("Job finished"), "{name}: no 'Job finished':\n{log}");
+    let warnings: Vec<&str> = log.lines().filter(|l| l.contains("*WARNING")).collect();
+    assert!(warnings.is_empty(), "{name}: ccx warned:\n{}", warnings.join("\n"));
+    Run { dir: job, log }
+}
+
+/// Displacements of the last increment in the ASCII .frd: node label -> (ux, uy, uz).
+fn frd_displacements(dir: &Path) -> std::collections::HashMap<u64, [f64; 3]> {
+    let text = std::fs::read_to_string(dir.join("model.frd")).unwrap();
+    let mut last = std::collections::HashMap::new();
+    let mut current: Option<std::collections::HashMap<u64, [f64; 3]>> = None;
+    for line in text.lines() {
+        if line.starts_with(" -4") {
+            current = line.contains("DISP").then(std::collections::HashMap::new);
+        } else if line.starts_with(" -3") {
+            if let Some(c) = current.take() {
+                last = c;
+            }
+        } else if let (Some(c), true) = (current.as_mut(), line.starts_with(" -1")) {
+            let node: u64 = line[3..13].trim().parse().unwrap();
+            let v: Vec<f64> = (0..3).map(|k| line[13 + 12 * k..25 + 12 * k].trim().parse().unwrap()).collect();
+            c.insert(node, [v[0], v[1], v[2]]);
+        }
+    }
+    assert!(!last.is_empty(), "no DISP block in the .frd");
+    last
+}
+
+/// Mean radial displacement and mean radius of the interface nodes away from the ends.
+fn inner_radial(mesh: &VesselMesh, disp: &std::collections::HashMap<u64, [f64; 3]>) -> (f64, f64, f64) {
+    let interface = &mesh.node_sets[sets::INTERFACE_NODES];
+    let (mut sum_u, mut sum_r, mut min_u, mut n) = (0.0, 0.0, f64::INFINITY, 0.0);
+    for &i in interface {
+        let p = mesh.nodes[i as usize];
+        let r = p.x.hypot(p.y);
+        let u = disp[&(i as u64 + 1)];
+        let ur = (u[0] * p.x + u[1] * p.y) / r;
+        min_u = min_u.min(ur);
+        if p.z > 5.0 && p.z < 25.0 {
+            sum_u += ur;
+            sum_r += r;
+            n += 1.0;
+        }
+    }
+    (sum_u / n, sum_r / n, min_u)
+}
+
+#[test]
+fn default_fibre_deck_runs_and_every_lumen_node_moves_outward() {
+    if !ccx_available() {
+        return;
+    }
+    // 48 around x 30 axial x 3 layers = 4320 wall elements.
+    let mesh = tube(48, 1.0, 0.4, 1, None);
+    let options = WriteOptions::default();
+    let run = solve(&mesh, &options, "default");
+    assert!(run.log.contains("Job finished"));
+    let disp = frd_displacements(&run.dir);
+    let interface = &mesh.node_sets[sets::INTERFACE_NODES];
+    let mut min_ur = f64::INFINITY;
+    for &i in interface {
+        let p = mesh.nodes[i as usize];
+        let u = disp.get(&(i as u64 + 1)).unwrap_or_else(|| panic!("node {} has no displacement", i + 1));
+        let ur = (u[0] * p.x + u[1] * p.y) / p.x.hypot(p.y);
+        min_ur = min_ur.min(ur);
+        assert!(ur > 0.0, "lumen node {} moves inward: u_r = {ur}", i + 1);
+    }
+    let (mean, r, _) = inner_radial(&mesh, &disp);
+    eprintln!("default HGO deck: {} lumen nodes, u_r min {min_ur:.5} mm, mean {mean:.5} mm at r = {r:.4} mm", interface.len());
+    // The end rings hold axially.
+    for end in ["wall_inlet", "wall_outlet"] {
+        for &i in &mesh.node_sets[end] {
+            assert!(disp[&(i as u64 + 1)][2].abs() < 1e-9, "{end} node {} moves axially", i + 1);
+        }
+    }
+    // The dat file has the lumen ring.
+    let dat = std::fs::read_to_string(run.dir.join("model.dat")).unwrap();
+    assert!(dat.contains("LUMEN_RING"), "{dat}");
+}
+
+#[test]
+fn linear_elastic_tube_matches_lame() {
+    if !ccx_available() {
+        return;
+    }
+    // Thick wall: a = 2, b = 3 mm, 48 around, 6 elements across, 15 axial: 4320 elements.
+    let mesh = tube(48, 2.0, 1.0, 2, None);
+    let mut options = WriteOptions::default();
+    options.fe.material = MaterialModel::LinearElastic;
+    options.fe.calculix_element = ElementType::C3D8I;
+    let (e, nu) = (100.0, 0.3);
+    for l in [&mut options.fe.intima, &mut options.fe.media, &mut options.fe.adventitia] {
+        l.youngs_modulus = e;
+        l.poisson_ratio = nu;
+    }
+    let run = solve(&mesh, &options, "lame");
+    let disp = frd_displacements(&run.dir);
+    let (got, a, _) = inner_radial(&mesh, &disp);
+    let outer = &mesh.node_sets[sets::OUTER_WALL_NODES];
+    let b = outer.iter().map(|&i| mesh.nodes[i as usize].x.hypot(mesh.nodes[i as usize].y)).sum::<f64>() / outer.len() as f64;
+    let p = 100.0 * MMHG_IN_MPA;
+    // Plane strain (ends held axially): u(a) = (1 + nu) p a / (E (b^2 - a^2)) ((1 - 2 nu) a^2 + b^2).
+    let expected = (1.0 + nu) * p * a / (e * (b * b - a * a)) * ((1.0 - 2.0 * nu) * a * a + b * b);
+    let error = (got - expected) / expected;
+    eprintln!("Lame: a = {a:.5}, b = {b:.5} mm, p = {p} MPa, E = {e}, nu = {nu}: expected u(a) = {expected:.6e} mm, got {got:.6e} mm, error {:.3} %", 100.0 * error);
+    assert!(error.abs() < 0.02, "Lame: expected {expected}, got {got}");
+}
+
+#[test]
+fn circumferential_fibres_stiffen_the_inflation_more_than_axial_ones() {
+    if !ccx_available() {
+        return;
+    }
+    let mut options = WriteOptions::default();
+    // Stiff enough ground matrix that the tube also holds 100 mmHg with axial fibres (which
+    // carry no hoop load under plane strain): a neo-Hookean tube cannot hold more than about
+    // mu ln(b/a) = 0.2 ln(1.2) = 0.036 MPa.
+    for l in [&mut options.fe.intima, &mut options.fe.media, &mut options.fe.adventitia] {
+        l.c10 = 0.1;
+        l.d = 2.0 / (100.0 * 0.2);
+        l.k1 = 0.1;
+        l.k2 = 2.0;
+    }
+    let mut increase = Vec::new();
+    for beta in [0.0, 90.0] {
+        // 32 around x 30 axial x 3 layers = 2880 wall elements.
+        let mesh = tube(32, 1.0, 0.4, 1, Some([beta; 3]));
+        let run = solve(&mesh, &options, &format!("beta{beta}"));
+        let disp = frd_displacements(&run.dir);
+        let (u, r, min_u) = inner_radial(&mesh, &disp);
+        eprintln!("beta = {beta} deg: mean inner radius increase {u:.6} mm ({:.3} % of {r:.4} mm), min {min_u:.6}", 100.0 * u / r);
+        assert!(min_u > 0.0);
+        increase.push(u);
+    }
+    assert!(increase[0] < increase[1], "beta 0 gives {} mm, beta 90 gives {} mm", increase[0], increase[1]);
+}
+
+#[test]
+fn deck_is_deterministic_and_within_field_limits() {
+    let mesh = tube(16, 3.0, 0.4, 1, None);
+    let mut options = WriteOptions::default();
+    let a = scratch("det-a");
+    let b = scratch("det-b");
+    for element in [ElementType::C3D8I, ElementType::C3D20] {
+        options.fe.calculix_element = element;
+        write_calculix(&mesh, &options, &a).unwrap();
+        write_calculix(&mesh, &options, &b).unwrap();
+        let ta = std::fs::read(a.join("calculix/model.inp")).unwrap();
+        let tb = std::fs::read(b.join("calculix/model.inp")).unwrap();
+        assert!(ta == tb, "not byte-identical");
+        let text = String::from_utf8(ta).unwrap();
+        let mut in_node = false;
+        // Data lines after the title line of *HEADING.
+        for line in text.lines().skip(2) {
+            if line.starts_with('*') {
+                in_node = line.starts_with("*NODE") && !line.starts_with("*NODE ");
+                assert!(!line.contains("C3D8H"));
+                continue;
+            }
+            let fields: Vec<&str> = line.split(',').collect();
+            assert!(fields.len() <= 16 || (fields.len() == 17 && fields[16].trim().is_empty()), "{line}");
+            for f in &fields {
+                assert!(f.trim().len() <= 21, "field too wide: {line}");
+            }
+            if in_node {
+                for f in &fields[1..] {
+                    let mantissa = f.trim().split('e').next().unwrap().replace(['-', '.'], "");
+                    assert!(mantissa.len() >= 12, "{line}");
+                }
+            }
+        }
+        if element == ElementType::C3D20 {
+            // Element records continue: 16 entries then 5.
+            let start = text.find("*ELEMENT, TYPE=C3D20").unwrap();
+            let mut lines = text[start..].lines().skip(1);
+            assert_eq!(lines.next().unwrap().split(',').count(), 17);
+            assert_eq!(lines.next().unwrap().split(',').count(), 5);
+        }
+    }
+    // C3D8H is refused in the CalculiX dialect.
+    options.fe.calculix_element = ElementType::C3D8H;
+    assert!(write_calculix(&mesh, &options, &a).unwrap_err().to_string().contains("hybrid"));
+    std::fs::remove_dir_all(&a).ok();
+    std::fs::remove_dir_all(&b).ok();
+}
+
+#[test]
+fn quadratic_deck_runs() {
+    if !ccx_available() {
+        return;
+    }
+    // 16 around x 10 axial x 3 layers = 480 C3D20.
+    let mesh = tube(16, 3.0, 0.4, 1, None);
+    let mut options = WriteOptions::default();
+    options.fe.calculix_element = ElementType::C3D20;
+    options.fe.material = MaterialModel::LinearElastic;
+    let run = solve(&mesh, &options, "c3d20");
+    let disp = frd_displacements(&run.dir);
+    let (_, _, min_u) = inner_radial(&mesh, &disp);
+    assert!(min_u > 0.0);
+}
