@@ -284,33 +284,12 @@ impl DeckUnits {
 // Templates and XML text
 // ------------------------------------------------------------------------------------------------
 
-/// Fills the `{{name}}` placeholders of `template` (called `label` in messages) with `values`.
-/// Values are XML-escaped. A placeholder without a value, a value without a placeholder and an
-/// unclosed `{{` are errors, so a template and its writer cannot drift apart silently.
+/// Fills the `{{name}}` placeholders of a built-in XML template with XML-escaped values; every
+/// value must be used ([`super::template::render_all`]).
 pub fn fill_template(label: &str, template: &str, values: &[(&str, String)]) -> Result<String> {
-    let mut out = String::with_capacity(template.len() + 64);
-    let mut used = vec![false; values.len()];
-    let mut rest = template;
-    while let Some(start) = rest.find("{{") {
-        out.push_str(&rest[..start]);
-        let after = &rest[start + 2..];
-        let end = after
-            .find("}}")
-            .ok_or_else(|| Error::Config(format!("template {label}: unclosed '{{{{' placeholder")))?;
-        let key = after[..end].trim();
-        let i = values
-            .iter()
-            .position(|(k, _)| *k == key)
-            .ok_or_else(|| Error::Config(format!("template {label}: unknown placeholder '{{{{{key}}}}}'")))?;
-        used[i] = true;
-        out.push_str(&quick_xml::escape::escape(values[i].1.as_str()));
-        rest = &after[end + 2..];
-    }
-    out.push_str(rest);
-    if let Some(i) = used.iter().position(|u| !u) {
-        return Err(Error::Config(format!("template {label}: no placeholder for value '{}'", values[i].0)));
-    }
-    Ok(out)
+    let escaped: Vec<(&str, String)> =
+        values.iter().map(|(k, v)| (*k, quick_xml::escape::escape(v.as_str()).into_owned())).collect();
+    super::template::render_all(label, template, &escaped)
 }
 
 /// A number as FEBio reads it back exactly: the shortest representation that round-trips (17

@@ -319,26 +319,9 @@ pub fn sanitize_name(name: &str) -> String {
     s
 }
 
-/// Substitutes `{{NAME}}` placeholders. Strict: a placeholder that is not in `values`, or an
-/// unclosed `{{`, is an error naming the template.
+/// A template filled by [`super::template::render`], ending with a newline.
 pub fn render(template: &str, source: &str, values: &[(&str, String)]) -> Result<String> {
-    let mut out = String::with_capacity(template.len() + 256);
-    let mut rest = template;
-    while let Some(start) = rest.find("{{") {
-        out.push_str(&rest[..start]);
-        let after = &rest[start + 2..];
-        let end = after
-            .find("}}")
-            .ok_or_else(|| Error::Config(format!("template {source}: unclosed '{{{{'")))?;
-        let key = after[..end].trim();
-        let value = values.iter().find(|(k, _)| *k == key).map(|(_, v)| v).ok_or_else(|| {
-            let known: Vec<&str> = values.iter().map(|(k, _)| *k).collect();
-            Error::Config(format!("template {source}: unknown placeholder {{{{{key}}}}} (known: {})", known.join(", ")))
-        })?;
-        out.push_str(value);
-        rest = &after[end + 2..];
-    }
-    out.push_str(rest);
+    let mut out = super::template::render(source, template, values)?;
     if !out.ends_with('\n') {
         out.push('\n');
     }

@@ -12,6 +12,7 @@ pub mod calculix;
 pub mod febio;
 pub mod inp;
 pub mod openfoam;
+pub mod template;
 pub mod vtu;
 
 /// What every writer may need besides the mesh.

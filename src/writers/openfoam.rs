@@ -626,26 +626,7 @@ const TEMPLATES: &[(&str, &str)] = &[
 ];
 const FSI_ALLRUN: &str = include_str!("../../templates/openfoam-fsi/Allrun");
 
-/// Substitutes `{{name}}` placeholders; an unknown or unterminated placeholder is an error.
-pub fn render(template_name: &str, text: &str, vars: &[(&str, String)]) -> Result<String> {
-    let mut out = String::with_capacity(text.len());
-    let mut rest = text;
-    while let Some(i) = rest.find("{{") {
-        out.push_str(&rest[..i]);
-        let after = &rest[i + 2..];
-        let j = after.find("}}").ok_or_else(|| {
-            Error::Config(format!("OpenFOAM template {template_name}: unterminated placeholder '{{{{' "))
-        })?;
-        let key = &after[..j];
-        let value = vars.iter().find(|(k, _)| *k == key).map(|(_, v)| v).ok_or_else(|| {
-            Error::Config(format!("OpenFOAM template {template_name}: unknown placeholder '{{{{{key}}}}}'"))
-        })?;
-        out.push_str(value);
-        rest = &after[j + 2..];
-    }
-    out.push_str(rest);
-    Ok(out)
-}
+pub use super::template::render;
 
 /// The inflow written to `0/U`.
 #[derive(Debug, Clone, PartialEq)]
