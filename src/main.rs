@@ -36,10 +36,14 @@ Parameters come from the preset, then the case file (--config, TOML), then these
   [centerline] resample_step, smoothing_passes, radius_smoothing_passes, trim_inlet, trim_outlet
   [lumen] core_elements, core_size, radial_elements, growth_ratio, first_cell_height, axial_spacing,
           axial_spacing_mm, ray_reach
-  [wall] thickness_ratio, thickness_mm; [wall.intima] / [wall.media] / [wall.adventitia]: fraction,
-          elements, fibre_angle_deg
+  [wall] thickness_ratio, thickness_mm, growth; [wall.intima] / [wall.media] / [wall.adventitia]:
+          fraction, elements, fibre_angle_deg
+  [openfoam] mean_velocity, flow_rate_ml_s, profile, solver, nu, iterations, end_time, binary
+  [fe] abaqus_element, calculix_element, material, template_dir, pressure_mmhg, [fe.<layer>]
+  [febio] lumen_pressure_mmhg, static_steps, [febio.<layer>], [febio.blood], [febio.fsi]
 
-Outputs in --output: mesh.vtu (ParaView) and report.json (counts, quality, surface accuracy, timings).";
+Formats (--formats): vtu, calculix, abaqus, febio, febio-fsi, openfoam, openfoam-fsi.
+Outputs in --output: the formats' files and report.json (counts, quality, surface accuracy, timings).";
 
 #[derive(Args)]
 struct MeshArgs {
