@@ -26,7 +26,11 @@ fn to_polylines(p: &Point3<f64>, lines: &[CenterlinePolyline]) -> (f64, f64) {
         for i in 0..l.points.len().saturating_sub(1) {
             let (a, b) = (l.points[i], l.points[i + 1]);
             let ab = b - a;
-            let t = if ab.norm_squared() > 0.0 { ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0) } else { 0.0 };
+            let t = if ab.norm_squared() > 0.0 {
+                ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             let d = (a + ab * t - p).norm();
             if d < best.0 {
                 best = (d, r[i] * (1.0 - t) + r[i + 1] * t);
@@ -44,8 +48,14 @@ fn percentile(values: &mut [f64], q: f64) -> f64 {
 fn extract(surface: &Path, units: LengthUnit, ends: Vec<Point3<f64>>) -> (Extraction, f64) {
     let s = read_surface(surface, units).unwrap();
     let t0 = Instant::now();
-    let e = extract_centerlines(&s, &ExtractOptions { ends, ..Default::default() })
-        .unwrap_or_else(|e| panic!("{}: {e}", surface.display()));
+    let e = extract_centerlines(
+        &s,
+        &ExtractOptions {
+            ends,
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{}: {e}", surface.display()));
     (e, t0.elapsed().as_secs_f64())
 }
 
@@ -73,8 +83,15 @@ fn synthetic_fixtures_match_their_exact_centerlines() {
                 (dist / r_exact, (r - r_exact).abs() / r_exact)
             })
             .unzip();
-        let (dm, d95, em) = (percentile(&mut d, 0.5), percentile(&mut d, 0.95), percentile(&mut e, 0.5));
-        println!("{name}: {} points, d/r median {dm:.4} p95 {d95:.4}, radius error median {em:.4}, {time:.2} s", line.points.len());
+        let (dm, d95, em) = (
+            percentile(&mut d, 0.5),
+            percentile(&mut d, 0.95),
+            percentile(&mut e, 0.5),
+        );
+        println!(
+            "{name}: {} points, d/r median {dm:.4} p95 {d95:.4}, radius error median {em:.4}, {time:.2} s",
+            line.points.len()
+        );
         assert!(dm < 0.02, "{name}: median d/r {dm}");
         assert!(em < 0.10, "{name}: median radius error {em}");
     }
@@ -100,10 +117,34 @@ fn vtp_round_trip() {
 
 /// (case folder, surface, unit, shipped centerline, number of ends)
 const REAL: [(&str, &str, LengthUnit, &str, usize); 4] = [
-    ("aneurisk_C0092_ica_segment", "C0092_clip1_0.vtp", LengthUnit::Mm, "C0092_clip1_mesh1_0.95_ratio_centerline.vtp", 2),
-    ("vmtk_aortoiliac", "aorta-surface-open-ends.stl", LengthUnit::Mm, "aorta-centerline.vtp", 3),
-    ("gmsh_carotid_bifurcation", "carotid.stl", LengthUnit::M, "centerlinesCAROTID.vtk", 3),
-    ("simvascular_demo_aortoiliac", "demo.vtp", LengthUnit::Cm, "demo-centerlines.vtp", 3),
+    (
+        "aneurisk_C0092_ica_segment",
+        "C0092_clip1_0.vtp",
+        LengthUnit::Mm,
+        "C0092_clip1_mesh1_0.95_ratio_centerline.vtp",
+        2,
+    ),
+    (
+        "vmtk_aortoiliac",
+        "aorta-surface-open-ends.stl",
+        LengthUnit::Mm,
+        "aorta-centerline.vtp",
+        3,
+    ),
+    (
+        "gmsh_carotid_bifurcation",
+        "carotid.stl",
+        LengthUnit::M,
+        "centerlinesCAROTID.vtk",
+        3,
+    ),
+    (
+        "simvascular_demo_aortoiliac",
+        "demo.vtp",
+        LengthUnit::Cm,
+        "demo-centerlines.vtp",
+        3,
+    ),
 ];
 
 #[test]
@@ -125,15 +166,28 @@ fn real_vessels_agree_with_their_shipped_centerlines() {
                 (dist / r, (r_ours - r).abs() / r)
             })
             .unzip();
-        let (dm, d95, em, e95) = (percentile(&mut d, 0.5), percentile(&mut d, 0.95), percentile(&mut e, 0.5), percentile(&mut e, 0.95));
+        let (dm, d95, em, e95) = (
+            percentile(&mut d, 0.5),
+            percentile(&mut d, 0.95),
+            percentile(&mut e, 0.5),
+            percentile(&mut e, 0.95),
+        );
         // Every terminal of the reference (a cell end not continued by another cell, so that
         // branch-split files count too) lies within 2 r of the end of one of our paths.
         let cells = &reference.polylines;
         let reached = cells.iter().enumerate().all(|(i, l)| {
             [0, l.points.len() - 1].iter().all(|&k| {
                 let (p, r) = (l.points[k], l.radii.as_ref().unwrap()[k]);
-                let continued = cells.iter().enumerate().any(|(j, m)| j != i && m.points.iter().any(|q| (q - p).norm() < 2.0 * r));
-                continued || ours.iter().any(|o| [o.points[0], o.points[o.points.len() - 1]].iter().any(|q| (q - p).norm() < 2.0 * r))
+                let continued = cells
+                    .iter()
+                    .enumerate()
+                    .any(|(j, m)| j != i && m.points.iter().any(|q| (q - p).norm() < 2.0 * r));
+                continued
+                    || ours.iter().any(|o| {
+                        [o.points[0], o.points[o.points.len() - 1]]
+                            .iter()
+                            .any(|q| (q - p).norm() < 2.0 * r)
+                    })
             })
         });
         println!(
@@ -167,10 +221,16 @@ fn cerebral_aneurysm_reaches_its_three_ends_inside_the_lumen() {
                 worst = worst.min(lumen.winding_number(p).abs());
             }
         }
-        assert_eq!(l.points[l.points.len() - 1], ex.ends.iter().find(|e| e.centre == last).unwrap().centre);
+        assert_eq!(
+            l.points[l.points.len() - 1],
+            ex.ends.iter().find(|e| e.centre == last).unwrap().centre
+        );
     }
     println!("palabos_cerebral_aneurysm: 3 ends reached, smallest |winding number| {worst:.3}, {time:.2} s");
-    assert!(worst > 0.5, "a centerline point lies outside the lumen (winding {worst})");
+    assert!(
+        worst > 0.5,
+        "a centerline point lies outside the lumen (winding {worst})"
+    );
 }
 
 #[test]
@@ -180,8 +240,21 @@ fn cli_writes_centerlines_and_needs_ends_for_rounded_caps() {
     let (aaa, _) = fixture("aaa");
     let o = vesselhex(&["centerlines", "--surface", path_str(&aaa), "--output", path_str(&out)]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("found 0 vessel end") && err.contains("--ends"), "{err}");
-    let o = vesselhex(&["centerlines", "--surface", path_str(&aaa), "--ends", "0,0,-10", "--ends", "0,0,130", "--output", path_str(&out)]);
+    assert!(
+        !o.status.success() && err.contains("found 0 vessel end") && err.contains("--ends"),
+        "{err}"
+    );
+    let o = vesselhex(&[
+        "centerlines",
+        "--surface",
+        path_str(&aaa),
+        "--ends",
+        "0,0,-10",
+        "--ends",
+        "0,0,130",
+        "--output",
+        path_str(&out),
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let back = read_centerlines(&out, LengthUnit::Mm).unwrap();
     assert_eq!(back.polylines.len(), 1);
@@ -191,10 +264,21 @@ fn cli_writes_centerlines_and_needs_ends_for_rounded_caps() {
 fn mesh_without_centerlines_through_the_cli() {
     let (curved, _) = fixture("curved");
     let out = temp_dir("cl-mesh");
-    let o = vesselhex(&["mesh", "--surface", path_str(&curved), "--output", path_str(&out), "--quiet"]);
+    let o = vesselhex(&[
+        "mesh",
+        "--surface",
+        path_str(&curved),
+        "--output",
+        path_str(&out),
+        "--quiet",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
-    let min = r["lumen"]["scaled_jacobian"]["min"].as_f64().unwrap().min(r["wall"]["scaled_jacobian"]["min"].as_f64().unwrap());
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let min = r["lumen"]["scaled_jacobian"]["min"]
+        .as_f64()
+        .unwrap()
+        .min(r["wall"]["scaled_jacobian"]["min"].as_f64().unwrap());
     println!("curved.stl meshed from computed centerlines: min scaled Jacobian {min:.3}");
     assert!(min >= 0.3, "min scaled Jacobian {min}");
 }

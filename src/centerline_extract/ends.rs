@@ -41,10 +41,16 @@ pub const HOLE_FRACTION: f64 = 0.2;
 
 /// Triangle index sets of the flat caps: the tag values whose triangles form a flat disc, or,
 /// without such tags, planar regions bounded by one sharp rim.
-pub fn find_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: Option<&[i64]>) -> Vec<(Option<i64>, Vec<u32>)> {
+pub fn find_caps(
+    vertices: &[Point3<f64>],
+    triangles: &[[u32; 3]],
+    tags: Option<&[i64]>,
+) -> Vec<(Option<i64>, Vec<u32>)> {
     if let Some(tags) = tags.filter(|t| t.len() == triangles.len()) {
         let mut groups: BTreeMap<i64, Vec<u32>> = BTreeMap::new();
-        tags.iter().enumerate().for_each(|(t, &g)| groups.entry(g).or_default().push(t as u32));
+        tags.iter()
+            .enumerate()
+            .for_each(|(t, &g)| groups.entry(g).or_default().push(t as u32));
         let caps: Vec<(Option<i64>, Vec<u32>)> = groups
             .into_iter()
             .filter(|(_, g)| 2 * g.len() < triangles.len() && is_flat_disc(vertices, triangles, g))
@@ -86,7 +92,10 @@ fn planar_regions(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<Vec<u
             let t = members[k] as usize;
             k += 1;
             for &u in &neighbours[t] {
-                if u < NON_MANIFOLD && region_of[u as usize] == u32::MAX && normals[u as usize].dot(&normals[seed]) > REGION_COS {
+                if u < NON_MANIFOLD
+                    && region_of[u as usize] == u32::MAX
+                    && normals[u as usize].dot(&normals[seed]) > REGION_COS
+                {
                     region_of[u as usize] = id;
                     members.push(u);
                 }
@@ -120,16 +129,27 @@ fn is_flat_disc(vertices: &[Point3<f64>], triangles: &[[u32; 3]], subset: &[u32]
     let [lp] = loops.as_slice() else { return false };
     let (centre, vector_area) = loop_centre_and_area(vertices, lp);
     let area = vector_area.norm();
-    let Some(normal) = vector_area.try_normalize(0.0) else { return false };
+    let Some(normal) = vector_area.try_normalize(0.0) else {
+        return false;
+    };
     let radius = (area / std::f64::consts::PI).sqrt();
-    let perimeter: f64 = (0..lp.len()).map(|i| (vertices[lp[(i + 1) % lp.len()] as usize] - vertices[lp[i] as usize]).norm()).sum();
-    let flat = tris.iter().flatten().all(|&v| (vertices[v as usize] - centre).dot(&normal).abs() <= CAP_FLATNESS * radius);
+    let perimeter: f64 = (0..lp.len())
+        .map(|i| (vertices[lp[(i + 1) % lp.len()] as usize] - vertices[lp[i] as usize]).norm())
+        .sum();
+    let flat = tris
+        .iter()
+        .flatten()
+        .all(|&v| (vertices[v as usize] - centre).dot(&normal).abs() <= CAP_FLATNESS * radius);
     flat && 4.0 * std::f64::consts::PI * area >= CAP_ROUNDNESS * perimeter * perimeter
 }
 
 /// The ends given by boundary loops (holes below [`HOLE_FRACTION`] of the largest loop left
 /// out), labelled as caps when every loop vertex belonged to a removed cap.
-pub fn loop_ends(vertices: &[Point3<f64>], loops: &[Vec<u32>], cap_tag_of_vertex: &BTreeMap<u32, Option<i64>>) -> Vec<VesselEnd> {
+pub fn loop_ends(
+    vertices: &[Point3<f64>],
+    loops: &[Vec<u32>],
+    cap_tag_of_vertex: &BTreeMap<u32, Option<i64>>,
+) -> Vec<VesselEnd> {
     let ends: Vec<VesselEnd> = loops
         .iter()
         .map(|lp| {
@@ -139,11 +159,17 @@ pub fn loop_ends(vertices: &[Point3<f64>], loops: &[Vec<u32>], cap_tag_of_vertex
                 Some(Some(tag)) if tags.iter().all(|t| t.is_some()) => EndKind::Cap { tag: **tag },
                 _ => EndKind::Open,
             };
-            VesselEnd { centre, radius: (area.norm() / std::f64::consts::PI).sqrt(), kind }
+            VesselEnd {
+                centre,
+                radius: (area.norm() / std::f64::consts::PI).sqrt(),
+                kind,
+            }
         })
         .collect();
     let largest = ends.iter().map(|e| e.radius).fold(0.0, f64::max);
-    ends.into_iter().filter(|e| e.radius >= HOLE_FRACTION * largest).collect()
+    ends.into_iter()
+        .filter(|e| e.radius >= HOLE_FRACTION * largest)
+        .collect()
 }
 
 /// How the inlet is chosen among the ends.
@@ -161,5 +187,7 @@ pub fn choose_inlet(ends: &[VesselEnd], choice: InletChoice) -> usize {
         InletChoice::Largest => -e.radius,
         InletChoice::Nearest(p) => (e.centre - p).norm(),
     };
-    (0..ends.len()).min_by(|&a, &b| key(&ends[a]).total_cmp(&key(&ends[b])).then(a.cmp(&b))).unwrap_or(0)
+    (0..ends.len())
+        .min_by(|&a, &b| key(&ends[a]).total_cmp(&key(&ends[b])).then(a.cmp(&b)))
+        .unwrap_or(0)
 }

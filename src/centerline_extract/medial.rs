@@ -42,7 +42,9 @@ pub fn shrinking_balls(vertices: &[Point3<f64>], inward: &[Vector3<f64>], max_ra
     // Only vertices of the (opened) surface block balls: those of removed caps have no normal.
     let used: Vec<usize> = (0..vertices.len()).filter(|&i| inward[i] != Vector3::zeros()).collect();
     let pts: Vec<[f64; 3]> = used.iter().map(|&i| arr(&vertices[i])).collect();
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&pts) else { return vec![None; vertices.len()] };
+    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&pts) else {
+        return vec![None; vertices.len()];
+    };
     let two = NonZeroUsize::new(2).expect("2 > 0");
     let tol = 1e-9 * max_radius;
     (0..vertices.len())
@@ -56,7 +58,10 @@ pub fn shrinking_balls(vertices: &[Point3<f64>], inward: &[Vector3<f64>], max_ra
             for _ in 0..SHRINK_ITERATIONS {
                 let c = p + n * r;
                 let near = tree.query(&arr(&c)).nearest_n::<SquaredEuclidean<f64>>(two).execute();
-                let q = near.iter().map(|h| vertices[used[h.item as usize]]).find(|q| (q - p).norm() > tol)?;
+                let q = near
+                    .iter()
+                    .map(|h| vertices[used[h.item as usize]])
+                    .find(|q| (q - p).norm() > tol)?;
                 if (q - c).norm() >= r - tol {
                     return (r < max_radius).then_some(Ball { centre: c, radius: r });
                 }
@@ -71,7 +76,10 @@ pub fn shrinking_balls(vertices: &[Point3<f64>], inward: &[Vector3<f64>], max_ra
                 }
                 r = shrunk;
             }
-            Some(Ball { centre: p + n * r, radius: r })
+            Some(Ball {
+                centre: p + n * r,
+                radius: r,
+            })
         })
         .collect()
 }
@@ -123,10 +131,17 @@ impl BallGraph {
                     r += get(v).radius;
                 }
                 let m = members.len() as f64;
-                nodes.push(Ball { centre: Point3::from(c / m), radius: r / m });
+                nodes.push(Ball {
+                    centre: Point3::from(c / m),
+                    radius: r / m,
+                });
             }
         }
-        let mut graph = BallGraph { nodes, node_of_vertex, links: vec![] };
+        let mut graph = BallGraph {
+            nodes,
+            node_of_vertex,
+            links: vec![],
+        };
         graph.links = graph.link_all();
         graph
     }
@@ -141,7 +156,14 @@ impl BallGraph {
         let k = NonZeroUsize::new(NEIGHBOURS + 1).expect("> 0");
         let found: Vec<Vec<u32>> = (0..self.nodes.len())
             .into_par_iter()
-            .map(|i| tree.query(&pts[i]).nearest_n::<SquaredEuclidean<f64>>(k).execute().iter().map(|h| h.item as u32).collect())
+            .map(|i| {
+                tree.query(&pts[i])
+                    .nearest_n::<SquaredEuclidean<f64>>(k)
+                    .execute()
+                    .iter()
+                    .map(|h| h.item as u32)
+                    .collect()
+            })
             .collect();
         for (i, near) in found.iter().enumerate() {
             for &j in near {
@@ -174,16 +196,28 @@ impl BallGraph {
         let dist = |b: &Ball| (b.centre - end.centre).norm();
         let mut order: Vec<usize> = (0..self.nodes.len()).collect();
         order.sort_by(|&a, &b| dist(&self.nodes[a]).total_cmp(&dist(&self.nodes[b])).then(a.cmp(&b)));
-        let holding: Vec<usize> = order.iter().copied().filter(|&n| dist(&self.nodes[n]) < self.nodes[n].radius).collect();
-        let within: Vec<usize> =
-            holding.iter().copied().filter(|&n| dist(&self.nodes[n]) < LINK_REACH * self.nodes[n].radius).collect();
+        let holding: Vec<usize> = order
+            .iter()
+            .copied()
+            .filter(|&n| dist(&self.nodes[n]) < self.nodes[n].radius)
+            .collect();
+        let within: Vec<usize> = holding
+            .iter()
+            .copied()
+            .filter(|&n| dist(&self.nodes[n]) < LINK_REACH * self.nodes[n].radius)
+            .collect();
         let cost = |n: usize| dist(&self.nodes[n]) * 0.5 * (1.0 / end.radius + 1.0 / self.nodes[n].radius);
         let chosen: Vec<(usize, f64)> = if !holding.is_empty() {
             let set = if within.is_empty() { &holding[..1] } else { &within[..] };
             set.iter().map(|&n| (n, cost(n))).collect()
         } else {
             let overlapping = |&&n: &&usize| dist(&self.nodes[n]) < OVERLAP * (end.radius + self.nodes[n].radius);
-            order.iter().take(NEIGHBOURS).filter(overlapping).map(|&n| (n, cost(n))).collect()
+            order
+                .iter()
+                .take(NEIGHBOURS)
+                .filter(overlapping)
+                .map(|&n| (n, cost(n)))
+                .collect()
         };
         self.nodes.push(end);
         self.links.push(vec![]);

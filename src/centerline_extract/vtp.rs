@@ -14,7 +14,10 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
     let keys: Vec<&String> = lines.first().map(|l| l.cell_tags.keys().collect()).unwrap_or_default();
     write_atomic(path, |w| {
         writeln!(w, r#"<?xml version="1.0"?>"#)?;
-        writeln!(w, r#"<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">"#)?;
+        writeln!(
+            w,
+            r#"<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">"#
+        )?;
         writeln!(w, "  <PolyData>")?;
         writeln!(
             w,
@@ -22,7 +25,10 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
             lines.len()
         )?;
         writeln!(w, r#"      <PointData Scalars="MaximumInscribedSphereRadius">"#)?;
-        writeln!(w, r#"        <DataArray type="Float64" Name="MaximumInscribedSphereRadius" format="ascii">"#)?;
+        writeln!(
+            w,
+            r#"        <DataArray type="Float64" Name="MaximumInscribedSphereRadius" format="ascii">"#
+        )?;
         for l in lines {
             for i in 0..l.points.len() {
                 let r = l.radii.as_ref().and_then(|r| r.get(i)).copied().unwrap_or(0.0);
@@ -31,16 +37,29 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
         }
         writeln!(w, "        </DataArray>\n      </PointData>\n      <CellData>")?;
         for key in &keys {
-            let values: Vec<String> = lines.iter().map(|l| l.cell_tags.get(*key).copied().unwrap_or(-1).to_string()).collect();
-            writeln!(w, r#"        <DataArray type="Int64" Name="{key}" format="ascii">{}</DataArray>"#, values.join(" "))?;
+            let values: Vec<String> = lines
+                .iter()
+                .map(|l| l.cell_tags.get(*key).copied().unwrap_or(-1).to_string())
+                .collect();
+            writeln!(
+                w,
+                r#"        <DataArray type="Int64" Name="{key}" format="ascii">{}</DataArray>"#,
+                values.join(" ")
+            )?;
         }
         writeln!(w, "      </CellData>\n      <Points>")?;
-        writeln!(w, r#"        <DataArray type="Float64" Name="Points" NumberOfComponents="3" format="ascii">"#)?;
+        writeln!(
+            w,
+            r#"        <DataArray type="Float64" Name="Points" NumberOfComponents="3" format="ascii">"#
+        )?;
         for p in lines.iter().flat_map(|l| &l.points) {
             writeln!(w, "          {:e} {:e} {:e}", p.x * scale, p.y * scale, p.z * scale)?;
         }
         writeln!(w, "        </DataArray>\n      </Points>\n      <Lines>")?;
-        writeln!(w, r#"        <DataArray type="Int64" Name="connectivity" format="ascii">"#)?;
+        writeln!(
+            w,
+            r#"        <DataArray type="Int64" Name="connectivity" format="ascii">"#
+        )?;
         let mut offset = 0;
         let mut offsets = vec![];
         for l in lines {
@@ -50,7 +69,11 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
             offsets.push(offset.to_string());
         }
         writeln!(w, "        </DataArray>")?;
-        writeln!(w, r#"        <DataArray type="Int64" Name="offsets" format="ascii">{}</DataArray>"#, offsets.join(" "))?;
+        writeln!(
+            w,
+            r#"        <DataArray type="Int64" Name="offsets" format="ascii">{}</DataArray>"#,
+            offsets.join(" ")
+        )?;
         writeln!(w, "      </Lines>\n    </Piece>\n  </PolyData>\n</VTKFile>")
     })
 }
