@@ -161,7 +161,7 @@ impl BallGraph {
                     .nearest_n::<SquaredEuclidean<f64>>(k)
                     .execute()
                     .iter()
-                    .map(|h| h.item as u32)
+                    .map(|h| h.item)
                     .collect()
             })
             .collect();
@@ -176,7 +176,7 @@ impl BallGraph {
             }
         }
         for l in &mut links {
-            l.sort_by(|a, b| a.0.cmp(&b.0));
+            l.sort_by_key(|e| e.0);
             l.dedup_by_key(|e| e.0);
         }
         links
