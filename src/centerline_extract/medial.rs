@@ -8,6 +8,10 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::num::NonZeroUsize;
 
+/// Balls are computed for at most about this many vertices (every k-th vertex beyond it): a
+/// ball query near the axis meets a whole ring of nearly equidistant vertices, so each costs
+/// far more than a usual nearest-neighbour query, and dense rings give the same centres anyway.
+const BALL_BUDGET: usize = 20_000;
 /// Iterations of the shrinking ball (it converges in a handful on vessel surfaces).
 const SHRINK_ITERATIONS: usize = 40;
 /// Balls whose centres lie within this fraction of the larger radius are merged into one node.
@@ -37,7 +41,8 @@ pub struct Ball {
 /// ball tangent at the vertex on its inner side, and while it holds another vertex, shrink it to
 /// the ball tangent at the vertex through that one. `None` where the normal is undefined or the
 /// ball never closes (the vertex faces an opening larger than `max_radius`). Vertices with a
-/// zero normal (not on any kept triangle) neither get nor block a ball.
+/// zero normal (not on any kept triangle) neither get nor block a ball; on dense surfaces only
+/// every k-th vertex gets one (see [`BALL_BUDGET`]).
 pub fn shrinking_balls(vertices: &[Point3<f64>], inward: &[Vector3<f64>], max_radius: f64) -> Vec<Option<Ball>> {
     // Only vertices of the (opened) surface block balls: those of removed caps have no normal.
     let used: Vec<usize> = (0..vertices.len()).filter(|&i| inward[i] != Vector3::zeros()).collect();
@@ -47,11 +52,12 @@ pub fn shrinking_balls(vertices: &[Point3<f64>], inward: &[Vector3<f64>], max_ra
     };
     let two = NonZeroUsize::new(2).expect("2 > 0");
     let tol = 1e-9 * max_radius;
+    let stride = used.len().div_ceil(BALL_BUDGET).max(1);
     (0..vertices.len())
         .into_par_iter()
         .map(|i| {
             let (p, n) = (vertices[i], inward[i]);
-            if n == Vector3::zeros() {
+            if n == Vector3::zeros() || i % stride != 0 {
                 return None;
             }
             let mut r = max_radius;
