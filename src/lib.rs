@@ -9,6 +9,7 @@ pub mod accuracy;
 pub mod annotate;
 pub mod blocks;
 pub mod centerline;
+pub mod centerline_extract;
 pub mod config;
 pub mod error;
 pub mod input;

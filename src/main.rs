@@ -19,6 +19,9 @@ enum Command {
     /// Mesh a vessel: lumen (core + four lateral blocks per section) and a three-layer wall.
     #[command(long_about = MESH_HELP)]
     Mesh(MeshArgs),
+    /// Compute centerlines from the lumen surface: one polyline from the inlet to every outlet,
+    /// with MaximumInscribedSphereRadius and CenterlineIds (VMTK-compatible .vtp, in --units).
+    Centerlines(CenterlinesArgs),
     /// Write the synthetic test vessels (STL + CSV centerline) into a folder.
     Fixtures {
         /// Folder to write into.
@@ -88,6 +91,70 @@ struct MeshArgs {
     threads: Option<usize>,
 }
 
+#[derive(Args)]
+struct CenterlinesArgs {
+    /// Lumen surface: STL (ASCII or binary), VTP or legacy VTK polydata.
+    #[arg(long)]
+    surface: PathBuf,
+    /// Length unit of the surface, the points given and the output: um, mm, cm or m [default: mm].
+    #[arg(long)]
+    units: Option<LengthUnit>,
+    /// The inlet: auto (the largest end) or x,y,z (the end nearest this point).
+    #[arg(long, default_value = "auto")]
+    inlet: String,
+    /// A point near an end that has no boundary loop or flat cap (rounded caps): x,y,z, repeatable.
+    #[arg(long, num_args = 1..)]
+    ends: Vec<String>,
+    /// Output file (.vtp).
+    #[arg(long)]
+    output: PathBuf,
+    /// No messages.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// Parses "x,y,z" into a point, scaled to millimetres.
+fn parse_point(text: &str, scale: f64) -> vesselhex::Result<nalgebra::Point3<f64>> {
+    let v: Vec<f64> = text.split(',').map(|t| t.trim().parse::<f64>()).collect::<Result<_, _>>().unwrap_or_default();
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(nalgebra::Point3::new(*x, *y, *z) * scale),
+        _ => Err(vesselhex::Error::Config(format!("'{text}' is not a point x,y,z (three numbers, comma-separated)"))),
+    }
+}
+
+fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
+    use vesselhex::centerline_extract::{extract_centerlines, write_vtp, ExtractOptions, InletChoice};
+    let units = args.units.unwrap_or(LengthUnit::Mm);
+    let scale = units.to_mm();
+    let inlet = match args.inlet.as_str() {
+        "auto" => InletChoice::Largest,
+        point => InletChoice::Nearest(parse_point(point, scale)?),
+    };
+    let ends = args.ends.iter().map(|e| parse_point(e, scale)).collect::<vesselhex::Result<Vec<_>>>()?;
+    let surface = vesselhex::input::read_surface(&args.surface, units)?;
+    let extraction = extract_centerlines(&surface, &ExtractOptions { inlet, ends })?;
+    write_vtp(&extraction.centerlines, units.from_mm(), &args.output)?;
+    if !args.quiet {
+        for note in &extraction.notes {
+            eprintln!("vesselhex: note: {note}");
+        }
+        for (k, e) in extraction.ends.iter().enumerate() {
+            let c = e.centre * units.from_mm();
+            let role = if k == extraction.inlet { "inlet" } else { "outlet" };
+            eprintln!(
+                "vesselhex: end {k} ({role}, {:?}): centre ({:.4}, {:.4}, {:.4}) {units}, radius {:.4} {units}",
+                e.kind,
+                c.x,
+                c.y,
+                c.z,
+                e.radius * units.from_mm()
+            );
+        }
+        eprintln!("vesselhex: {} centerlines written to {}", extraction.centerlines.polylines.len(), args.output.display());
+    }
+    Ok(())
+}
+
 fn mesh(args: MeshArgs) -> vesselhex::Result<()> {
     let mut config = match &args.config {
         Some(path) => MeshConfig::from_case_file(path, args.preset)?,
@@ -141,6 +208,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Mesh(args) => mesh(args),
+        Command::Centerlines(args) => centerlines(args),
         Command::Fixtures { output } => vesselhex::synthetic::write_all_fixtures(&output).map(|_| ()),
     };
     match result {

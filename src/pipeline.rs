@@ -232,18 +232,18 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
             )));
         }
     }
-    let centerline_path = request.centerlines.clone().ok_or_else(|| {
-        Error::Config(
-            "no --centerlines given: computing centerlines from the surface is not available yet; give a VMTK \
-             centerline (.vtp/.vtk) or a CSV with header x,y,z,r"
-                .into(),
-        )
-    })?;
     let staging = Staging::new(&request.output)?;
     let mut progress = Progress::new(request.quiet, 9);
     progress.stage("reading");
     let surface = read_surface(&request.surface, config.units)?;
-    let centerlines = read_centerlines(&centerline_path, request.centerline_units.unwrap_or(config.units))?;
+    let (centerlines, centerline_path) = match &request.centerlines {
+        Some(path) => (read_centerlines(path, request.centerline_units.unwrap_or(config.units))?, path.clone()),
+        None => {
+            let options = crate::centerline_extract::ExtractOptions::default();
+            let extraction = crate::centerline_extract::extract_centerlines(&surface, &options)?;
+            (extraction.single_path()?, PathBuf::from("(computed from the surface)"))
+        }
+    };
     let meshed = mesh_vessel(&surface, &centerlines, config, &mut progress)?;
 
     progress.stage("writing");

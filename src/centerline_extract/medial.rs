@@ -1,0 +1,273 @@
+//! Medial balls of the surface vertices (the shrinking-ball algorithm) and the graph of
+//! overlapping balls on which the centerlines are shortest paths.
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+use std::num::NonZeroUsize;
+
+/// Balls are computed for at most about this many vertices (every k-th vertex beyond it): a
+/// ball query near the axis meets a whole ring of nearly equidistant vertices, so each costs
+/// far more than a usual nearest-neighbour query, and dense rings give the same centres anyway.
+const BALL_BUDGET: usize = 20_000;
+/// Iterations of the shrinking ball (it converges in a handful on vessel surfaces).
+const SHRINK_ITERATIONS: usize = 40;
+/// Balls whose centres lie within this fraction of the larger radius are merged into one node.
+const MERGE_FRACTION: f64 = 0.1;
+/// Each node is linked to (at most) this many nearest nodes whose balls overlap enough.
+const NEIGHBOURS: usize = 24;
+/// Two balls are linked when their centres are closer than this fraction of the smaller radius:
+/// the segment between the centres then lies in their union, inside the lumen, and is short
+/// enough not to cut corners in bends (a chord of 0.5 r sags by r^2 / 32 Rb).
+const LINK_REACH: f64 = 0.5;
+/// An end that no ball holds is linked to nearby balls it overlaps by this fraction of the sum
+/// of the radii.
+const OVERLAP: f64 = 0.9;
+
+fn arr(p: &Point3<f64>) -> [f64; 3] {
+    [p.x, p.y, p.z]
+}
+
+/// A maximal ball: empty of surface vertices, touching the surface at its vertex.
+#[derive(Debug, Clone, Copy)]
+pub struct Ball {
+    pub centre: Point3<f64>,
+    pub radius: f64,
+}
+
+/// The shrinking-ball medial ball of every vertex (Ma, Bae, Bhatt & Lee 2012): start from a
+/// ball tangent at the vertex on its inner side, and while it holds another vertex, shrink it to
+/// the ball tangent at the vertex through that one. `None` where the normal is undefined or the
+/// ball never closes (the vertex faces an opening larger than `max_radius`). Vertices with a
+/// zero normal (not on any kept triangle) neither get nor block a ball; on dense surfaces only
+/// every k-th vertex gets one (see [`BALL_BUDGET`]).
+pub fn shrinking_balls(vertices: &[Point3<f64>], inward: &[Vector3<f64>], max_radius: f64) -> Vec<Option<Ball>> {
+    // Only vertices of the (opened) surface block balls: those of removed caps have no normal.
+    let used: Vec<usize> = (0..vertices.len()).filter(|&i| inward[i] != Vector3::zeros()).collect();
+    let pts: Vec<[f64; 3]> = used.iter().map(|&i| arr(&vertices[i])).collect();
+    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&pts) else {
+        return vec![None; vertices.len()];
+    };
+    let two = NonZeroUsize::new(2).expect("2 > 0");
+    let tol = 1e-9 * max_radius;
+    let stride = used.len().div_ceil(BALL_BUDGET).max(1);
+    (0..vertices.len())
+        .into_par_iter()
+        .map(|i| {
+            let (p, n) = (vertices[i], inward[i]);
+            if n == Vector3::zeros() || i % stride != 0 {
+                return None;
+            }
+            let mut r = max_radius;
+            for _ in 0..SHRINK_ITERATIONS {
+                let c = p + n * r;
+                let near = tree.query(&arr(&c)).nearest_n::<SquaredEuclidean<f64>>(two).execute();
+                let q = near
+                    .iter()
+                    .map(|h| vertices[used[h.item as usize]])
+                    .find(|q| (q - p).norm() > tol)?;
+                if (q - c).norm() >= r - tol {
+                    return (r < max_radius).then_some(Ball { centre: c, radius: r });
+                }
+                let d = q - p;
+                let along = d.dot(&n);
+                if along <= 0.0 {
+                    return None;
+                }
+                let shrunk = d.norm_squared() / (2.0 * along);
+                if shrunk >= r - tol {
+                    return Some(Ball { centre: c, radius: r });
+                }
+                r = shrunk;
+            }
+            Some(Ball {
+                centre: p + n * r,
+                radius: r,
+            })
+        })
+        .collect()
+}
+
+/// Nodes (merged balls) and the links between overlapping ones.
+pub struct BallGraph {
+    pub nodes: Vec<Ball>,
+    /// For each vertex, the node its ball was merged into.
+    pub node_of_vertex: Vec<Option<u32>>,
+    links: Vec<Vec<(u32, f64)>>,
+}
+
+impl BallGraph {
+    /// Merges the balls (largest first; a ball absorbs the unmerged ones whose centres lie within
+    /// [`MERGE_FRACTION`] of its radius, the node being their mean) and links every node to its
+    /// nearest overlapping nodes, with cost length x mean(1/R) (VMTK's 1/R cost).
+    pub fn new(balls: &[Option<Ball>]) -> BallGraph {
+        let ids: Vec<usize> = (0..balls.len()).filter(|&i| balls[i].is_some()).collect();
+        let get = |i: usize| balls[i].expect("filtered");
+        let mut node_of_vertex = vec![None; balls.len()];
+        let mut nodes = vec![];
+        if !ids.is_empty() {
+            let pts: Vec<[f64; 3]> = ids.iter().map(|&i| arr(&get(i).centre)).collect();
+            let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&pts).expect("not empty");
+            let mut order: Vec<usize> = (0..ids.len()).collect();
+            order.sort_by(|&a, &b| get(ids[b]).radius.total_cmp(&get(ids[a]).radius).then(a.cmp(&b)));
+            for k in order {
+                if node_of_vertex[ids[k]].is_some() {
+                    continue;
+                }
+                let ball = get(ids[k]);
+                let reach = MERGE_FRACTION * ball.radius;
+                let mut members: Vec<usize> = tree
+                    .query(&pts[k])
+                    .within::<SquaredEuclidean<f64>>(reach * reach)
+                    .execute()
+                    .iter()
+                    .map(|h| ids[h.item as usize])
+                    .filter(|&v| node_of_vertex[v].is_none())
+                    .collect();
+                members.push(ids[k]);
+                members.sort_unstable();
+                members.dedup();
+                let id = nodes.len() as u32;
+                let (mut c, mut r) = (Vector3::zeros(), 0.0);
+                for &v in &members {
+                    node_of_vertex[v] = Some(id);
+                    c += get(v).centre.coords;
+                    r += get(v).radius;
+                }
+                let m = members.len() as f64;
+                nodes.push(Ball {
+                    centre: Point3::from(c / m),
+                    radius: r / m,
+                });
+            }
+        }
+        let mut graph = BallGraph {
+            nodes,
+            node_of_vertex,
+            links: vec![],
+        };
+        graph.links = graph.link_all();
+        graph
+    }
+
+    fn link_all(&self) -> Vec<Vec<(u32, f64)>> {
+        let mut links = vec![vec![]; self.nodes.len()];
+        if self.nodes.is_empty() {
+            return links;
+        }
+        let pts: Vec<[f64; 3]> = self.nodes.iter().map(|b| arr(&b.centre)).collect();
+        let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&pts).expect("not empty");
+        let k = NonZeroUsize::new(NEIGHBOURS + 1).expect("> 0");
+        let found: Vec<Vec<u32>> = (0..self.nodes.len())
+            .into_par_iter()
+            .map(|i| {
+                tree.query(&pts[i])
+                    .nearest_n::<SquaredEuclidean<f64>>(k)
+                    .execute()
+                    .iter()
+                    .map(|h| h.item)
+                    .collect()
+            })
+            .collect();
+        for (i, near) in found.iter().enumerate() {
+            for &j in near {
+                if j as usize != i {
+                    if let Some(cost) = self.cost(i, j as usize) {
+                        links[i].push((j, cost));
+                        links[j as usize].push((i as u32, cost));
+                    }
+                }
+            }
+        }
+        for l in &mut links {
+            l.sort_by_key(|e| e.0);
+            l.dedup_by_key(|e| e.0);
+        }
+        links
+    }
+
+    fn cost(&self, i: usize, j: usize) -> Option<f64> {
+        let (a, b) = (self.nodes[i], self.nodes[j]);
+        let d = (a.centre - b.centre).norm();
+        (d < LINK_REACH * a.radius.min(b.radius)).then(|| d * 0.5 * (1.0 / a.radius + 1.0 / b.radius))
+    }
+
+    /// Adds an end node (a cap centre with its section radius) linked to the nodes whose balls
+    /// hold it within reach, or to the nearest one that holds it, or failing that to the nearby
+    /// nodes whose balls overlap its section's ball.
+    pub fn add_end(&mut self, end: Ball) -> u32 {
+        let id = self.nodes.len() as u32;
+        let dist = |b: &Ball| (b.centre - end.centre).norm();
+        let mut order: Vec<usize> = (0..self.nodes.len()).collect();
+        order.sort_by(|&a, &b| dist(&self.nodes[a]).total_cmp(&dist(&self.nodes[b])).then(a.cmp(&b)));
+        let holding: Vec<usize> = order
+            .iter()
+            .copied()
+            .filter(|&n| dist(&self.nodes[n]) < self.nodes[n].radius)
+            .collect();
+        let within: Vec<usize> = holding
+            .iter()
+            .copied()
+            .filter(|&n| dist(&self.nodes[n]) < LINK_REACH * self.nodes[n].radius)
+            .collect();
+        let cost = |n: usize| dist(&self.nodes[n]) * 0.5 * (1.0 / end.radius + 1.0 / self.nodes[n].radius);
+        let chosen: Vec<(usize, f64)> = if !holding.is_empty() {
+            let set = if within.is_empty() { &holding[..1] } else { &within[..] };
+            set.iter().map(|&n| (n, cost(n))).collect()
+        } else {
+            let overlapping = |&&n: &&usize| dist(&self.nodes[n]) < OVERLAP * (end.radius + self.nodes[n].radius);
+            order
+                .iter()
+                .take(NEIGHBOURS)
+                .filter(overlapping)
+                .map(|&n| (n, cost(n)))
+                .collect()
+        };
+        self.nodes.push(end);
+        self.links.push(vec![]);
+        for (n, cost) in chosen {
+            self.links[id as usize].push((n as u32, cost));
+            self.links[n].push((id, cost));
+        }
+        id
+    }
+
+    /// Dijkstra from `source`: the predecessor of every reached node (`u32::MAX` for the source
+    /// and unreached nodes) and the cost to reach it.
+    pub fn shortest_paths(&self, source: u32) -> (Vec<u32>, Vec<f64>) {
+        #[derive(PartialEq)]
+        struct Entry(f64, u32);
+        impl Eq for Entry {}
+        impl Ord for Entry {
+            fn cmp(&self, o: &Self) -> Ordering {
+                o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
+            }
+        }
+        impl PartialOrd for Entry {
+            fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+                Some(self.cmp(o))
+            }
+        }
+        let n = self.nodes.len();
+        let (mut prev, mut dist) = (vec![u32::MAX; n], vec![f64::INFINITY; n]);
+        let mut heap = BinaryHeap::new();
+        dist[source as usize] = 0.0;
+        heap.push(Entry(0.0, source));
+        while let Some(Entry(d, u)) = heap.pop() {
+            if d > dist[u as usize] {
+                continue;
+            }
+            for &(v, w) in &self.links[u as usize] {
+                let nd = d + w;
+                if nd < dist[v as usize] {
+                    dist[v as usize] = nd;
+                    prev[v as usize] = u;
+                    heap.push(Entry(nd, v));
+                }
+            }
+        }
+        (prev, dist)
+    }
+}

@@ -1,0 +1,349 @@
+//! Centerlines from the lumen surface alone: the vessel's ends, the inlet, and one polyline
+//! from the inlet to every outlet carrying the maximal inscribed sphere radius, written as
+//! VMTK-compatible polydata ([`write_vtp`]) or handed straight to the mesher.
+//!
+//! # Method: shortest paths through maximal balls
+//!
+//! VMTK's centerlines are paths of minimal cost `1/R` through the Voronoi diagram of the surface
+//! points, whose vertices are centres of maximal empty balls (the medial axis) with `R` their
+//! radius. We keep that principle, which centres the line by construction and gives the radius
+//! for free, but replace the two fragile parts:
+//!
+//! * **Medial balls without a 3D Delaunay tessellation.** Every surface vertex gets its maximal
+//!   empty ball by the *shrinking-ball* algorithm (Ma, Bae, Bhatt & Lee, "3D medial axis point
+//!   approximation using nearest neighbors and the normal field", Vis. Comput. 2012): a ball
+//!   tangent at the vertex on its inner side is shrunk until no other vertex lies inside. Its
+//!   centre is the vertex's Voronoi pole, the same point VMTK's poles approximate, found with
+//!   a few k-d tree queries per vertex: no robust-predicate Delaunay code, no qhull/TetGen (C,
+//!   C++, AGPL), no slivers, parallel and deterministic.
+//! * **A graph of overlapping balls instead of Voronoi faces.** Balls closer than a tenth of
+//!   their radius are merged; two balls are linked when their centres are closer than half the
+//!   smaller radius, so every link lies in the union of two empty balls, i.e. inside the lumen,
+//!   and is short enough not to cut corners. Dijkstra with VMTK's cost `length x mean(1/R)` from the inlet gives all the paths at
+//!   once, sharing the inlet part exactly as VMTK's do.
+//!
+//! The path through ball centres zig-zags at the scale of the merge distance, so it is
+//! resampled at a tenth of the radius and smoothed with a Gaussian in arc length of width
+//! 0.25 r (corner cutting in a bend of radius `Rb` is about `(0.25 r)^2 / 2Rb`, well below
+//! 1 % of r on every vessel we have). The radius stored is the true distance from each point to
+//! the (opened) surface's triangles, computed with the BVH of [`LumenSurface`].
+//!
+//! A harmonic field on the surface (level-set rings) was the alternative; its ring centroids
+//! are not the centres of inscribed spheres (biased in bends and at junctions), its radius is
+//! an equivalent one, and several outlets need one field each or a Reeb graph. The ball graph
+//! handles any number of outlets with one Dijkstra.
+//!
+//! # Ends
+//!
+//! Triangles are first wound consistently (inward and outward triangles mixed in one file are
+//! repaired) and oriented by the sign of the enclosed volume. Flat caps are taken off: the
+//! tag values of a cell array (`ModelFaceID`) whose triangles form a flat disc, or else planar
+//! regions with a sharp rim. Every boundary loop of what remains is an end (loops smaller than
+//! a fifth of the largest are holes), its centre the edge-length weighted loop centre (VMTK's
+//! cap centre) and its size the equivalent radius sqrt(area / pi). Rounded caps have neither:
+//! the user gives points near them (`--ends`), snapped to the nearest surface vertex whose
+//! maximal ball becomes the end. The inlet is the largest end, or the end nearest a point.
+
+mod ends;
+mod medial;
+mod topology;
+mod vtp;
+
+pub use ends::{EndKind, InletChoice, VesselEnd};
+pub use vtp::write_vtp;
+
+use crate::error::{Error, Result};
+use crate::input::{CenterlinePolyline, Centerlines, TriangleSurface};
+use crate::surface::LumenSurface;
+use indexmap::IndexMap;
+use medial::{Ball, BallGraph};
+use nalgebra::Point3;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+
+/// Output points are spaced by this fraction of the path's small radii.
+const STEP_FRACTION: f64 = 0.1;
+/// Gaussian smoothing width, as a fraction of the local radius.
+const SMOOTH_SIGMA: f64 = 0.25;
+/// A given end point within this many end radii of a found end's centre names that end.
+const SAME_END: f64 = 1.5;
+/// Two largest ends closer than this ratio make the automatic inlet choice worth a note.
+const AMBIGUOUS_INLET: f64 = 0.9;
+
+/// What the user tells the extraction (lengths in millimetres).
+#[derive(Debug, Clone)]
+pub struct ExtractOptions {
+    pub inlet: InletChoice,
+    /// Extra end points (rounded caps), snapped to the surface.
+    pub ends: Vec<Point3<f64>>,
+}
+
+impl Default for ExtractOptions {
+    fn default() -> Self {
+        ExtractOptions {
+            inlet: InletChoice::Largest,
+            ends: vec![],
+        }
+    }
+}
+
+/// The centerlines and how they were found.
+#[derive(Debug, Clone)]
+pub struct Extraction {
+    /// One polyline per outlet, from the inlet, with `MaximumInscribedSphereRadius` and
+    /// `CenterlineIds`; millimetres.
+    pub centerlines: Centerlines,
+    pub ends: Vec<VesselEnd>,
+    /// Index of the inlet in `ends`; the polylines go to the other ends in order.
+    pub inlet: usize,
+    /// Facts worth telling the user (repairs, caps removed, ambiguous inlet).
+    pub notes: Vec<String>,
+}
+
+impl Extraction {
+    /// The single inlet-outlet path of a vessel with two ends, as the mesher takes it today.
+    pub fn single_path(&self) -> Result<Centerlines> {
+        match self.centerlines.polylines.len() {
+            1 => Ok(self.centerlines.clone()),
+            n => Err(Error::input(
+                &self.centerlines.source,
+                format!(
+                    "has {} ends (1 inlet, {n} outlets): meshing branching vessels is not available yet; \
+                     `vesselhex centerlines` writes all {n} paths",
+                    n + 1
+                ),
+            )),
+        }
+    }
+}
+
+/// Computes the centerlines of a lumen surface (millimetres). Never panics on bad geometry:
+/// failures (too few ends, an end not connected to the inlet) are errors naming the fix.
+pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) -> Result<Extraction> {
+    let source = &surface.source;
+    let vertices = &surface.vertices;
+    let mut notes = vec![];
+    let mut triangles = surface.triangles.clone();
+    let flipped = topology::orient_consistently(&mut triangles);
+    if flipped > 0 {
+        notes.push(format!(
+            "{flipped} triangles wound against their neighbours were flipped"
+        ));
+    }
+
+    // Take flat caps off, remembering which vertices they held.
+    let tags = surface.triangle_tags.as_ref().map(|(_, t)| t.as_slice());
+    let caps = ends::find_caps(vertices, &triangles, tags);
+    let mut in_cap = vec![false; triangles.len()];
+    let mut cap_tag_of_vertex = BTreeMap::new();
+    for (tag, tris) in &caps {
+        for &t in tris {
+            in_cap[t as usize] = true;
+            triangles[t as usize].iter().for_each(|&v| {
+                cap_tag_of_vertex.insert(v, *tag);
+            });
+        }
+    }
+    if !caps.is_empty() {
+        notes.push(format!("{} flat caps removed", caps.len()));
+    }
+    let open: Vec<[u32; 3]> = triangles
+        .iter()
+        .zip(&in_cap)
+        .filter(|(_, c)| !**c)
+        .map(|(t, _)| *t)
+        .collect();
+    let loops = topology::boundary_loops(&open);
+    let mut found = ends::loop_ends(vertices, &loops, &cap_tag_of_vertex);
+    if found.len() < loops.len() {
+        notes.push(format!(
+            "{} small boundary loops ignored as holes",
+            loops.len() - found.len()
+        ));
+    }
+
+    // Inward vertex normals: the winding's sign from the volume closed by fans on every loop.
+    let sign = if topology::signed_volume6(vertices, &open, &loops) > 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    let inward: Vec<_> = topology::vertex_normals(vertices, &open)
+        .into_iter()
+        .map(|n| n * sign)
+        .collect();
+    let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
+    let (lo, hi) = lumen.bounding_box();
+    let balls = medial::shrinking_balls(vertices, &inward, (hi - lo).norm());
+    let mut graph = BallGraph::new(&balls);
+
+    // Ends as graph nodes: loop centres are added; given points use their vertex's ball.
+    let mut end_nodes: Vec<u32> = found
+        .iter()
+        .map(|e| {
+            graph.add_end(Ball {
+                centre: e.centre,
+                radius: e.radius,
+            })
+        })
+        .collect();
+    for p in &options.ends {
+        if found.iter().any(|e| (e.centre - p).norm() < SAME_END * e.radius) {
+            continue;
+        }
+        let hit = lumen.closest(p);
+        let tri = lumen
+            .triangles
+            .get(hit.triangle as usize)
+            .ok_or_else(|| Error::input(source, "the surface has no triangles"))?;
+        let node = tri
+            .iter()
+            .filter_map(|&v| {
+                Some((
+                    (vertices[v as usize] - hit.point).norm(),
+                    graph.node_of_vertex[v as usize]?,
+                ))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, n)| n)
+            .ok_or_else(|| {
+                Error::input(
+                    source,
+                    format!(
+                        "the end point ({:.3}, {:.3}, {:.3}) mm: no inscribed ball found at the surface there",
+                        p.x, p.y, p.z
+                    ),
+                )
+            })?;
+        let ball = graph.nodes[node as usize];
+        found.push(VesselEnd {
+            centre: ball.centre,
+            radius: ball.radius,
+            kind: EndKind::Given,
+        });
+        end_nodes.push(node);
+    }
+    if found.len() < 2 {
+        return Err(Error::input(
+            source,
+            format!(
+                "found {} vessel end(s) (open boundary loops or flat caps; {} given with --ends), a centerline needs at \
+                 least 2: rounded (dome) caps cannot be detected. Give a point near every end not found, e.g. \
+                 --ends x,y,z --ends x,y,z (in the surface's units), and --inlet x,y,z to pick the inlet",
+                found.len() - options.ends.len().min(found.len()),
+                options.ends.len()
+            ),
+        ));
+    }
+
+    let inlet = ends::choose_inlet(&found, options.inlet);
+    if options.inlet == InletChoice::Largest {
+        let mut radii: Vec<f64> = found.iter().map(|e| e.radius).collect();
+        radii.sort_by(|a, b| b.total_cmp(a));
+        if radii[1] > AMBIGUOUS_INLET * radii[0] {
+            notes.push(format!(
+                "the two largest ends have nearly the same radius ({:.3} and {:.3} mm): the inlet was taken as the \
+                 largest; give --inlet x,y,z to choose",
+                radii[0], radii[1]
+            ));
+        }
+    }
+    let (prev, _) = graph.shortest_paths(end_nodes[inlet]);
+    let mut polylines = vec![];
+    for (k, (end, &node)) in found.iter().zip(&end_nodes).enumerate().filter(|(k, _)| *k != inlet) {
+        let mut chain = vec![node];
+        while let Some(&last) = chain.last() {
+            match prev[last as usize] {
+                u32::MAX => break,
+                p => chain.push(p),
+            }
+        }
+        if chain.last() != Some(&end_nodes[inlet]) {
+            return Err(Error::input(
+                source,
+                format!(
+                    "end {k} at ({:.3}, {:.3}, {:.3}) mm is not connected to the inlet through the lumen (a pinched or \
+                     self-intersecting surface?)",
+                    end.centre.x, end.centre.y, end.centre.z
+                ),
+            ));
+        }
+        chain.reverse();
+        let balls: Vec<Ball> = chain.iter().map(|&n| graph.nodes[n as usize]).collect();
+        let (points, radii) = smooth_path(&balls, &lumen);
+        let mut cell_tags = IndexMap::new();
+        cell_tags.insert("CenterlineIds".to_string(), polylines.len() as i64);
+        polylines.push(CenterlinePolyline {
+            points,
+            radii: Some(radii),
+            normals: None,
+            cell_tags,
+        });
+    }
+    Ok(Extraction {
+        centerlines: Centerlines {
+            polylines,
+            source: source.clone(),
+        },
+        ends: found,
+        inlet,
+        notes,
+    })
+}
+
+/// Resamples a chain of balls at [`STEP_FRACTION`] of its small radii, smooths it with a
+/// Gaussian of width [`SMOOTH_SIGMA`] x radius in arc length (window kept symmetric, so the end
+/// points stay put), and measures the radius as the distance to the surface.
+fn smooth_path(balls: &[Ball], lumen: &LumenSurface) -> (Vec<Point3<f64>>, Vec<f64>) {
+    let mut s = vec![0.0];
+    for w in balls.windows(2) {
+        s.push(s[s.len() - 1] + (w[1].centre - w[0].centre).norm());
+    }
+    let length = s[s.len() - 1];
+    let mut radii: Vec<f64> = balls.iter().map(|b| b.radius).collect();
+    radii.sort_by(f64::total_cmp);
+    let small = radii[radii.len() / 10];
+    let n = ((length / (STEP_FRACTION * small)).ceil() as usize).clamp(1, 100_000);
+    let at = |t: f64| {
+        let i = s.partition_point(|&x| x <= t).clamp(1, s.len().max(2) - 1) - 1;
+        if i + 1 >= balls.len() {
+            return (balls[balls.len() - 1].centre, balls[balls.len() - 1].radius);
+        }
+        let w = if s[i + 1] > s[i] {
+            ((t - s[i]) / (s[i + 1] - s[i])).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (
+            balls[i].centre + (balls[i + 1].centre - balls[i].centre) * w,
+            balls[i].radius * (1.0 - w) + balls[i + 1].radius * w,
+        )
+    };
+    let samples: Vec<(f64, Point3<f64>, f64)> = (0..=n)
+        .map(|k| {
+            let t = length * k as f64 / n as f64;
+            let (p, r) = at(t);
+            (t, p, r)
+        })
+        .collect();
+    let smoothed: Vec<Point3<f64>> = (0..samples.len())
+        .into_par_iter()
+        .map(|i| {
+            let (t, p, r) = samples[i];
+            let sigma = SMOOTH_SIGMA * r;
+            let half = (3.0 * sigma).min(t).min(length - t);
+            if half <= 0.0 || sigma <= 0.0 {
+                return p;
+            }
+            let (mut sum, mut weight) = (nalgebra::Vector3::zeros(), 0.0);
+            for &(tj, pj, _) in samples.iter().filter(|q| (q.0 - t).abs() <= half) {
+                let w = (-(tj - t).powi(2) / (2.0 * sigma * sigma)).exp();
+                sum += pj.coords * w;
+                weight += w;
+            }
+            Point3::from(sum / weight)
+        })
+        .collect();
+    let radii = smoothed.par_iter().map(|p| lumen.closest(p).distance).collect();
+    (smoothed, radii)
+}

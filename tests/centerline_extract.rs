@@ -1,0 +1,306 @@
+//! Built-in centerlines: accuracy on the analytic fixtures, agreement with the centerlines
+//! shipped with the real vessels, the .vtp round trip and the CLI.
+//!
+//! Metrics (distances point-to-segment):
+//! * synthetic: d = distance from each of our points to the exact centerline, over the exact
+//!   radius there; radius error = |r_ours - r_exact| / r_exact.
+//! * real: d = distance from each point of the shipped centerline to our polylines, over the
+//!   shipped radius there; radius error against our radius at the closest point.
+
+mod common;
+
+use common::*;
+use nalgebra::Point3;
+use std::path::Path;
+use std::time::Instant;
+use vesselhex::centerline_extract::{extract_centerlines, write_vtp, ExtractOptions, Extraction};
+use vesselhex::input::{read_centerlines, read_surface, CenterlinePolyline};
+use vesselhex::surface::LumenSurface;
+use vesselhex::units::LengthUnit;
+
+/// Distance from p to the polylines, and the radius interpolated at the closest point.
+fn to_polylines(p: &Point3<f64>, lines: &[CenterlinePolyline]) -> (f64, f64) {
+    let mut best = (f64::INFINITY, 0.0);
+    for l in lines {
+        let r = l.radii.as_ref().expect("radius");
+        for i in 0..l.points.len().saturating_sub(1) {
+            let (a, b) = (l.points[i], l.points[i + 1]);
+            let ab = b - a;
+            let t = if ab.norm_squared() > 0.0 {
+                ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d = (a + ab * t - p).norm();
+            if d < best.0 {
+                best = (d, r[i] * (1.0 - t) + r[i + 1] * t);
+            }
+        }
+    }
+    best
+}
+
+fn percentile(values: &mut [f64], q: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[((values.len() - 1) as f64 * q).round() as usize]
+}
+
+fn extract(surface: &Path, units: LengthUnit, ends: Vec<Point3<f64>>) -> (Extraction, f64) {
+    let s = read_surface(surface, units).unwrap();
+    let t0 = Instant::now();
+    let e = extract_centerlines(
+        &s,
+        &ExtractOptions {
+            ends,
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{}: {e}", surface.display()));
+    (e, t0.elapsed().as_secs_f64())
+}
+
+#[test]
+fn synthetic_fixtures_match_their_exact_centerlines() {
+    let cases: [(&str, Vec<Point3<f64>>); 5] = [
+        ("straight", vec![]),
+        ("curved", vec![]),
+        ("helical", vec![]),
+        ("tapered", vec![]),
+        ("aaa", vec![Point3::new(0.0, 0.0, -10.0), Point3::new(0.0, 0.0, 130.0)]),
+    ];
+    for (name, ends) in cases {
+        let (surface, exact) = fixture(name);
+        let exact = read_centerlines(&exact, LengthUnit::Mm).unwrap();
+        let (ex, time) = extract(&surface, LengthUnit::Mm, ends);
+        assert_eq!(ex.centerlines.polylines.len(), 1, "{name}: one path");
+        let line = &ex.centerlines.polylines[0];
+        let (mut d, mut e): (Vec<f64>, Vec<f64>) = line
+            .points
+            .iter()
+            .zip(line.radii.as_ref().unwrap())
+            .map(|(p, r)| {
+                let (dist, r_exact) = to_polylines(p, &exact.polylines);
+                (dist / r_exact, (r - r_exact).abs() / r_exact)
+            })
+            .unzip();
+        let (dm, d95, em) = (
+            percentile(&mut d, 0.5),
+            percentile(&mut d, 0.95),
+            percentile(&mut e, 0.5),
+        );
+        println!(
+            "{name}: {} points, d/r median {dm:.4} p95 {d95:.4}, radius error median {em:.4}, {time:.2} s",
+            line.points.len()
+        );
+        assert!(dm < 0.02, "{name}: median d/r {dm}");
+        assert!(em < 0.10, "{name}: median radius error {em}");
+    }
+}
+
+#[test]
+fn vtp_round_trip() {
+    let (surface, _) = fixture("curved");
+    let (ex, _) = extract(&surface, LengthUnit::Mm, vec![]);
+    let dir = temp_dir("cl-roundtrip");
+    let path = dir.join("cl.vtp");
+    write_vtp(&ex.centerlines, 0.1, &path).unwrap();
+    let back = read_centerlines(&path, LengthUnit::Cm).unwrap();
+    assert_eq!(back.polylines.len(), ex.centerlines.polylines.len());
+    for (a, b) in back.polylines.iter().zip(&ex.centerlines.polylines) {
+        assert_eq!(a.points.len(), b.points.len());
+        assert!(a.points.iter().zip(&b.points).all(|(p, q)| (p - q).norm() < 1e-9));
+        let (ra, rb) = (a.radii.as_ref().unwrap(), b.radii.as_ref().unwrap());
+        assert!(ra.iter().zip(rb).all(|(x, y)| (x - y).abs() < 1e-9));
+        assert_eq!(a.cell_tags.get("CenterlineIds"), b.cell_tags.get("CenterlineIds"));
+    }
+}
+
+/// (case folder, surface, unit, shipped centerline, number of ends)
+const REAL: [(&str, &str, LengthUnit, &str, usize); 4] = [
+    (
+        "aneurisk_C0092_ica_segment",
+        "C0092_clip1_0.vtp",
+        LengthUnit::Mm,
+        "C0092_clip1_mesh1_0.95_ratio_centerline.vtp",
+        2,
+    ),
+    (
+        "vmtk_aortoiliac",
+        "aorta-surface-open-ends.stl",
+        LengthUnit::Mm,
+        "aorta-centerline.vtp",
+        3,
+    ),
+    (
+        "gmsh_carotid_bifurcation",
+        "carotid.stl",
+        LengthUnit::M,
+        "centerlinesCAROTID.vtk",
+        3,
+    ),
+    (
+        "simvascular_demo_aortoiliac",
+        "demo.vtp",
+        LengthUnit::Cm,
+        "demo-centerlines.vtp",
+        3,
+    ),
+];
+
+#[test]
+fn real_vessels_agree_with_their_shipped_centerlines() {
+    let Some(vessels) = vessels_dir() else { return };
+    for (case, surface, unit, reference, n_ends) in REAL {
+        let dir = vessels.join(case);
+        let (ex, time) = extract(&dir.join(surface), unit, vec![]);
+        let reference = read_centerlines(&dir.join(reference), unit).unwrap();
+        let ours = &ex.centerlines.polylines;
+        assert_eq!(ex.ends.len(), n_ends, "{case}: ends found");
+        assert_eq!(ours.len(), n_ends - 1, "{case}: one path per outlet");
+        let (mut d, mut e): (Vec<f64>, Vec<f64>) = reference
+            .polylines
+            .iter()
+            .flat_map(|l| l.points.iter().zip(l.radii.as_ref().unwrap()))
+            .map(|(p, r)| {
+                let (dist, r_ours) = to_polylines(p, ours);
+                (dist / r, (r_ours - r).abs() / r)
+            })
+            .unzip();
+        let (dm, d95, em, e95) = (
+            percentile(&mut d, 0.5),
+            percentile(&mut d, 0.95),
+            percentile(&mut e, 0.5),
+            percentile(&mut e, 0.95),
+        );
+        // Every terminal of the reference (a cell end not continued by another cell, so that
+        // branch-split files count too) lies within 2 r of the end of one of our paths.
+        let cells = &reference.polylines;
+        let reached = cells.iter().enumerate().all(|(i, l)| {
+            [0, l.points.len() - 1].iter().all(|&k| {
+                let (p, r) = (l.points[k], l.radii.as_ref().unwrap()[k]);
+                let continued = cells
+                    .iter()
+                    .enumerate()
+                    .any(|(j, m)| j != i && m.points.iter().any(|q| (q - p).norm() < 2.0 * r));
+                continued
+                    || ours.iter().any(|o| {
+                        [o.points[0], o.points[o.points.len() - 1]]
+                            .iter()
+                            .any(|q| (q - p).norm() < 2.0 * r)
+                    })
+            })
+        });
+        println!(
+            "{case}: {} ends, {} paths, d/r median {dm:.4} p95 {d95:.4}, radius error median {em:.4} p95 {e95:.4}, \
+             ends reached {reached}, {time:.2} s; notes: {:?}",
+            ex.ends.len(),
+            ours.len(),
+            ex.notes
+        );
+        assert!(dm < 0.10, "{case}: median d/r {dm}");
+        assert!(em < 0.10, "{case}: median radius error {em}");
+        assert!(reached, "{case}: a reference end is not reached");
+    }
+}
+
+#[test]
+fn cerebral_aneurysm_reaches_its_three_ends_inside_the_lumen() {
+    let Some(vessels) = vessels_dir() else { return };
+    let path = vessels.join("palabos_cerebral_aneurysm/aneurysm.stl");
+    let (ex, time) = extract(&path, LengthUnit::Mm, vec![]);
+    assert_eq!(ex.ends.len(), 3);
+    assert_eq!(ex.centerlines.polylines.len(), 2);
+    let lumen = LumenSurface::new(&read_surface(&path, LengthUnit::Mm).unwrap()).unwrap();
+    let mut worst: f64 = f64::INFINITY;
+    for l in &ex.centerlines.polylines {
+        let r = l.radii.as_ref().unwrap();
+        let (first, last) = (l.points[0], l.points[l.points.len() - 1]);
+        for (p, _) in l.points.iter().zip(r).step_by(3) {
+            // Near an open end the winding number drops towards 1/2: judge only beyond one radius.
+            if (p - first).norm() > r[0] && (p - last).norm() > r[r.len() - 1] {
+                worst = worst.min(lumen.winding_number(p).abs());
+            }
+        }
+        assert_eq!(
+            l.points[l.points.len() - 1],
+            ex.ends.iter().find(|e| e.centre == last).unwrap().centre
+        );
+    }
+    println!("palabos_cerebral_aneurysm: 3 ends reached, smallest |winding number| {worst:.3}, {time:.2} s");
+    assert!(
+        worst > 0.5,
+        "a centerline point lies outside the lumen (winding {worst})"
+    );
+}
+
+#[test]
+fn cli_writes_centerlines_and_needs_ends_for_rounded_caps() {
+    let dir = temp_dir("cl-cli");
+    let out = dir.join("aaa.vtp");
+    let (aaa, _) = fixture("aaa");
+    let o = vesselhex(&["centerlines", "--surface", path_str(&aaa), "--output", path_str(&out)]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("found 0 vessel end") && err.contains("--ends"),
+        "{err}"
+    );
+    let o = vesselhex(&[
+        "centerlines",
+        "--surface",
+        path_str(&aaa),
+        "--ends",
+        "0,0,-10",
+        "--ends",
+        "0,0,130",
+        "--output",
+        path_str(&out),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let back = read_centerlines(&out, LengthUnit::Mm).unwrap();
+    assert_eq!(back.polylines.len(), 1);
+}
+
+#[test]
+fn mesh_without_centerlines_through_the_cli() {
+    let (curved, _) = fixture("curved");
+    let out = temp_dir("cl-mesh");
+    let o = vesselhex(&[
+        "mesh",
+        "--surface",
+        path_str(&curved),
+        "--output",
+        path_str(&out),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let min = r["lumen"]["scaled_jacobian"]["min"]
+        .as_f64()
+        .unwrap()
+        .min(r["wall"]["scaled_jacobian"]["min"].as_f64().unwrap());
+    println!("curved.stl meshed from computed centerlines: min scaled Jacobian {min:.3}");
+    assert!(min >= 0.3, "min scaled Jacobian {min}");
+}
+
+/// Time for a ~100k-triangle surface (the helical fixture's shape at a fine resolution).
+#[test]
+fn time_for_a_100k_triangle_surface() {
+    let v = vesselhex::synthetic::fixture_by_name("helical").unwrap();
+    let (vertices, triangles) = vesselhex::synthetic::triangulate(v.as_ref(), 144, 0.16);
+    let surface = vesselhex::input::TriangleSurface {
+        vertices,
+        triangles,
+        triangle_tags: None,
+        source: "fine helix".into(),
+    };
+    let t0 = Instant::now();
+    let ex = extract_centerlines(&surface, &ExtractOptions::default()).unwrap();
+    println!(
+        "{} triangles: {} points in {:.2} s",
+        surface.triangles.len(),
+        ex.centerlines.polylines[0].points.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    assert_eq!(ex.centerlines.polylines.len(), 1);
+}
