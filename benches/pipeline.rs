@@ -58,6 +58,23 @@ fn dir_size(p: &std::path::Path) -> u64 {
     }
 }
 
+/// Centerline extraction from a bare surface of about 100,000 triangles (the helical fixture's
+/// shape at a fine resolution).
+fn centerlines_case() {
+    use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions};
+    let v = vesselhex::synthetic::fixture_by_name("helical").expect("fixture");
+    let (vertices, triangles) = vesselhex::synthetic::triangulate(v.as_ref(), 144, 0.16);
+    let surface = vesselhex::input::TriangleSurface { vertices, triangles, triangle_tags: None, source: "fine helix".into() };
+    let t = Instant::now();
+    let ex = extract_centerlines(&surface, &ExtractOptions::default()).expect("centerlines");
+    println!(
+        "\ncenterlines: {} triangles -> {} paths in {:.3} s",
+        surface.triangles.len(),
+        ex.centerlines.polylines.len(),
+        t.elapsed().as_secs_f64()
+    );
+}
+
 fn main() {
     // `cargo bench -- <filter>` runs the cases whose label contains the filter.
     let filter: Option<String> = std::env::args().skip(1).find(|a| !a.starts_with('-'));
@@ -67,6 +84,9 @@ fn main() {
     big.lumen.axial_spacing_mm = Some(0.0569);
     let cases: [(&str, &str, &MeshConfig); 3] =
         [("fine preset", "aaa", &fine), ("fine preset", "helical", &fine), ("800k hexes", "helical", &big)];
+    if filter.as_deref().is_none_or(|f| "centerlines".contains(f)) {
+        centerlines_case();
+    }
     for (label, name, config) in cases {
         if filter.as_deref().is_none_or(|f| label.contains(f) || name.contains(f)) {
             run(label, name, config);
