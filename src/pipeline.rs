@@ -223,7 +223,15 @@ impl Drop for Staging {
 pub fn run(request: &MeshRequest) -> Result<Report> {
     let config = &request.config;
     config.validate()?;
-    let formats: Vec<&str> = config.formats.iter().map(|s| s.as_str()).collect();
+    let mut formats: Vec<&str> = config.formats.iter().map(|s| s.as_str()).collect();
+    // The FSI package refers to the openfoam and calculix outputs: write them first.
+    if let Some(i) = formats.iter().position(|f| *f == "fsi") {
+        for implied in ["calculix", "openfoam"] {
+            if !formats.contains(&implied) {
+                formats.insert(i, implied);
+            }
+        }
+    }
     for f in &formats {
         if writers::writer(f).is_none() {
             return Err(Error::Config(format!(

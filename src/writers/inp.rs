@@ -736,6 +736,17 @@ fn write_data_lines(w: &mut dyn Write, entries: &[u64]) -> std::io::Result<()> {
     Ok(())
 }
 
+/// The deck as text in two parts: the model data (everything before the step) and the step
+/// (the rendered `step_inflation.inp`, written last), so another step can follow the same model.
+pub fn deck_parts(mesh: &VesselMesh, options: &WriteOptions, dialect: Dialect) -> Result<(String, String)> {
+    let deck = Deck::new(mesh, options, dialect)?;
+    let mut buf = Vec::new();
+    deck.write(&mut buf).map_err(|e| Error::Config(format!("internal: cannot render the deck: {e}")))?;
+    let text = String::from_utf8(buf).map_err(|e| Error::Config(format!("internal: deck is not UTF-8: {e}")))?;
+    let model_len = text.len() - deck.step.len();
+    Ok((text[..model_len].to_string(), deck.step.clone()))
+}
+
 /// Writes `<dialect>/model.inp` under `dir`.
 pub fn write_inp(mesh: &VesselMesh, options: &WriteOptions, dialect: Dialect, dir: &Path) -> Result<Vec<PathBuf>> {
     let deck = Deck::new(mesh, options, dialect)?;

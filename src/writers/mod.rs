@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 pub mod abaqus;
 pub mod calculix;
 pub mod febio;
+pub mod fsi;
 pub mod inp;
 pub mod openfoam;
 pub mod template;
@@ -56,6 +57,11 @@ pub const WRITERS: &[(&str, &str, WriterFn)] = &[
     ("febio-fsi", "febio/fsi.feb: FEBio 4.0 monolithic fluid-FSI model of lumen and wall", febio::write_fsi),
     ("abaqus", "abaqus/model.inp: Abaqus deck of the wall, HGO layers, inflation step", abaqus::write_abaqus),
     ("calculix", "calculix/model.inp: CalculiX deck of the wall, ELASTIC_FIBER layers, inflation step", calculix::write_calculix),
+    (
+        "fsi",
+        "fsi/: exact fluid-solid interface maps and preCICE files for OpenFOAM + CalculiX (implies openfoam, calculix)",
+        fsi::write_fsi,
+    ),
 ];
 
 /// The writer of a format name.
