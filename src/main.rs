@@ -45,7 +45,8 @@ Parameters come from the preset, then the case file (--config, TOML), then these
   [fe] abaqus_element, calculix_element, material, template_dir, pressure_mmhg, [fe.<layer>]
   [febio] lumen_pressure_mmhg, static_steps, [febio.<layer>], [febio.blood], [febio.fsi]
 
-Formats (--formats): vtu, calculix, abaqus, febio, febio-fsi, openfoam, openfoam-fsi.
+Formats (--formats): vtu, calculix, abaqus, febio, febio-fsi, openfoam, openfoam-fsi, fsi (implies openfoam
+and calculix).
 Outputs in --output: the formats' files and report.json (counts, quality, surface accuracy, timings).";
 
 #[derive(Args)]
