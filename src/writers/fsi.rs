@@ -43,7 +43,7 @@
 
 use super::inp::{deck_parts, fmt_const, Dialect};
 use super::openfoam::{inlet_velocities, lumen_polymesh, render, PolyMesh};
-use super::{write_atomic, WriteOptions};
+use super::WriteOptions;
 use crate::config::InletProfile;
 use crate::error::{Error, Result};
 use crate::mesh::{face_nodes, quad_area_vector, sets, VesselMesh};
@@ -191,21 +191,10 @@ fn num(x: f64) -> String {
 }
 
 fn write_file(dir: &Path, rel: &str, text: &str, executable: bool) -> Result<PathBuf> {
-    let path = dir.join(rel);
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, "cannot create the folder", e))?;
-    }
-    write_atomic(&path, |w| w.write_all(text.as_bytes()))?;
-    #[cfg(unix)]
-    if executable {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
-            .map_err(|e| Error::io(&path, "cannot make executable", e))?;
-    }
-    #[cfg(not(unix))]
-    let _ = executable;
+    super::write_text_file(dir, rel, text, executable)?;
     Ok(Path::new("fsi").join(rel))
 }
+
 
 const TEMPLATES: &[(&str, &str)] = &[
     ("precice-config.xml", include_str!("../../templates/fsi/precice-config.xml")),

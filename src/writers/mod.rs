@@ -74,6 +74,26 @@ pub fn format_names() -> Vec<&'static str> {
     WRITERS.iter().map(|w| w.0).collect()
 }
 
+/// Writes a text file at `dir/rel` (creating its folders) through [`write_atomic`]; `executable`
+/// makes it runnable (scripts such as `Allrun`).
+pub fn write_text_file(dir: &Path, rel: &str, text: &str, executable: bool) -> Result<()> {
+    use crate::error::Error;
+    let path = dir.join(rel);
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, "cannot create the folder", e))?;
+    }
+    write_atomic(&path, |w| w.write_all(text.as_bytes()))?;
+    #[cfg(unix)]
+    if executable {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
+            .map_err(|e| Error::io(&path, "cannot make executable", e))?;
+    }
+    #[cfg(not(unix))]
+    let _ = executable;
+    Ok(())
+}
+
 /// Writes a file through a temporary name in the same folder and renames it when complete,
 /// so an interrupted write never leaves a half-written file under the final name.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<()> {

@@ -773,21 +773,10 @@ fn case_vars(poly: &PolyMesh, config: &OpenFoamConfig) -> Result<Vec<(&'static s
 }
 
 fn write_text(case: &Path, rel: &str, text: &str, executable: bool) -> Result<PathBuf> {
-    let path = case.join(rel);
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, "cannot create the folder", e))?;
-    }
-    write_atomic(&path, |w| w.write_all(text.as_bytes()))?;
-    #[cfg(unix)]
-    if executable {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
-            .map_err(|e| Error::io(&path, "cannot make executable", e))?;
-    }
-    #[cfg(not(unix))]
-    let _ = executable;
+    super::write_text_file(case, rel, text, executable)?;
     Ok(PathBuf::from(rel))
 }
+
 
 fn prefixed(folder: &str, paths: Vec<PathBuf>) -> Vec<PathBuf> {
     paths.into_iter().map(|p| Path::new(folder).join(p)).collect()
