@@ -896,7 +896,7 @@ fn decks_are_deterministic_and_written_by_the_format_table() {
 fn metres_give_kilograms_and_pascals() {
     let mesh = tube();
     let text = wall_deck(mesh, &options(LengthUnit::M)).unwrap();
-    assert!(text.contains("Units: length m, time s, force N, mass kg, stress Pa"));
+    assert!(text.contains("Units: length m, force N, stress Pa, mass kg, time s."));
     let d = check_all(&text, "solid").unwrap();
     for (id, p) in &d.nodes {
         let q = mesh.nodes[*id as usize - 1];

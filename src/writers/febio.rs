@@ -29,7 +29,7 @@
 use super::{write_atomic, WriteOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{face_nodes, sets, ElementFace, Region, VesselMesh};
-use crate::units::LengthUnit;
+use crate::units::MechanicalUnits;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -217,68 +217,9 @@ impl FebioConfig {
 // Units
 // ------------------------------------------------------------------------------------------------
 
-/// The deck's consistent unit system: length = the output unit L (lambda metres), time s, force
-/// N, so mass = kg / lambda and stress = Pa / lambda^2.
-#[derive(Debug, Clone, Copy)]
-pub struct DeckUnits {
-    pub length: LengthUnit,
-}
-
-impl DeckUnits {
-    /// Deck length units in one metre (1/lambda), exact, so conversions are one correctly rounded
-    /// division: 1060 kg/m^3 becomes 1.06e-9 tonne/mm^3, not 1.0600000000000003e-9.
-    fn per_metre(self) -> f64 {
-        match self.length {
-            LengthUnit::Um => 1e6,
-            LengthUnit::Mm => 1e3,
-            LengthUnit::Cm => 1e2,
-            LengthUnit::M => 1.0,
-        }
-    }
-    /// Factor from mm (the mesh's unit) to the deck's length unit.
-    pub fn length_from_mm(self) -> f64 {
-        self.length.from_mm()
-    }
-    /// A stress in Pa in deck units.
-    pub fn stress(self, pa: f64) -> f64 {
-        pa / self.per_metre().powi(2)
-    }
-    /// A density in kg/m^3 in deck units.
-    pub fn density(self, kg_m3: f64) -> f64 {
-        kg_m3 / self.per_metre().powi(4)
-    }
-    /// A dynamic viscosity in Pa s in deck units.
-    pub fn viscosity(self, pa_s: f64) -> f64 {
-        pa_s / self.per_metre().powi(2)
-    }
-    /// A velocity in m/s in deck units.
-    pub fn velocity(self, m_s: f64) -> f64 {
-        m_s * self.per_metre()
-    }
-    fn mass_name(self) -> &'static str {
-        match self.length {
-            LengthUnit::Um => "1e6 kg",
-            LengthUnit::Mm => "tonne",
-            LengthUnit::Cm => "100 kg",
-            LengthUnit::M => "kg",
-        }
-    }
-    fn stress_name(self) -> &'static str {
-        match self.length {
-            LengthUnit::Um => "1e12 Pa",
-            LengthUnit::Mm => "MPa",
-            LengthUnit::Cm => "1e4 Pa",
-            LengthUnit::M => "Pa",
-        }
-    }
-    /// One line stating the system, for the deck's header comment.
-    pub fn describe(self) -> String {
-        let (l, m, s) = (self.length.name(), self.mass_name(), self.stress_name());
-        format!(
-            "Units: length {l}, time s, force N, mass {m}, stress {s}; density {m}/{l}^3, viscosity {s} s, velocity {l}/s."
-        )
-    }
-}
+/// The deck's unit system: the crate's one ([`MechanicalUnits`]), so FEBio and CalculiX decks
+/// written in the same length unit agree.
+pub type DeckUnits = MechanicalUnits;
 
 // ------------------------------------------------------------------------------------------------
 // Templates and XML text
@@ -452,7 +393,7 @@ fn wall_materials(xml: &mut Xml, mesh: &VesselMesh, cfg: &FebioConfig, u: DeckUn
 
 /// `<Nodes>` with the given (sorted) node indices, labelled index + 1.
 fn nodes(xml: &mut Xml, mesh: &VesselMesh, name: &str, which: &[u32], u: DeckUnits) {
-    let s = u.length_from_mm();
+    let s = u.length.from_mm();
     xml.open("Nodes", &[("name", name)]);
     for &n in which {
         let p = mesh.nodes[n as usize];
@@ -632,13 +573,13 @@ pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
     let cfg = &options.febio;
     cfg.validate()?;
     check_triads(mesh)?;
-    let u = DeckUnits { length: options.length_unit };
+    let u = MechanicalUnits::of(options.length_unit);
     let supports = end_supports(mesh)?;
     let pressure = u.stress(cfg.lumen_pressure_mmhg * MMHG_PA);
 
     let mut comment = vec![
         format!("vesselhex {}: FEBio 4.0 deck of the artery wall (intima, media, adventitia).", env!("CARGO_PKG_VERSION")),
-        u.describe(),
+        format!("Units: {}.", u.describe()),
         "Holzapfel-Gasser-Ogden per layer; per-element mat_axis a = e_circ, d = e_long (element centroid frame),"
             .into(),
         "so the two fibre families lie at +-gamma from the circumferential direction.".into(),
@@ -742,7 +683,7 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
     let cfg = &options.febio;
     cfg.validate()?;
     check_triads(mesh)?;
-    let u = DeckUnits { length: options.length_unit };
+    let u = MechanicalUnits::of(options.length_unit);
     let f = &cfg.fsi;
     let b = &cfg.blood;
     let inlet = mesh.inlet().ok_or_else(|| Error::Geometry("FEBio FSI: the mesh has no inlet".into()))?;
@@ -766,7 +707,7 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
             "vesselhex {}: FEBio 4.0 monolithic fluid-structure deck (Module fluid-FSI).",
             env!("CARGO_PKG_VERSION")
         ),
-        u.describe(),
+        format!("Units: {}.", u.describe()),
         format!(
             "Lumen: one fluid-FSI domain (blood: density {} kg/m^3, bulk modulus {} Pa, Newtonian viscosity {} Pa s;",
             param(b.density_kg_m3),
@@ -944,6 +885,7 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::units::LengthUnit;
 
     #[test]
     fn templates_fill_strictly() {
@@ -996,14 +938,14 @@ mod tests {
 
     #[test]
     fn unit_systems_are_consistent() {
-        let mm = DeckUnits { length: LengthUnit::Mm };
+        let mm = MechanicalUnits::of(LengthUnit::Mm);
         assert_eq!(mm.density(1060.0), 1.06e-9);
         assert_eq!(mm.viscosity(3.5e-3), 3.5e-9);
         assert_eq!(mm.stress(2.2e9), 2200.0);
         assert_eq!(mm.stress(3e3), 0.003);
         assert_eq!(mm.stress(1e-3), 1e-9);
         assert_eq!(mm.velocity(0.1), 100.0);
-        let m = DeckUnits { length: LengthUnit::M };
+        let m = MechanicalUnits::of(LengthUnit::M);
         assert_eq!(m.stress(13332.2), 13332.2);
         assert_eq!(m.density(1060.0), 1060.0);
         assert!(mm.describe().contains("tonne") && mm.describe().contains("MPa"));

@@ -342,7 +342,7 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
             ("TIME_WINDOW", fmt_const(dt)),
             ("END_TIME", fmt_const(end)),
             ("NSET", nset),
-            ("UNITS", super::inp::UnitSystem::of(LengthUnit::M).describe()),
+            ("UNITS", crate::units::MechanicalUnits::of(LengthUnit::M).describe()),
         ],
     )?;
     deck.push_str(&step);

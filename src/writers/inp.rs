@@ -51,7 +51,7 @@
 use super::{write_atomic, WriteOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{abaqus_face_label, sets, ElementFace, Region, VesselMesh, FACE_INNER, HEX_EDGES};
-use crate::units::LengthUnit;
+use crate::units::MechanicalUnits;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -261,33 +261,6 @@ impl FeConfig {
     }
 }
 
-/// The consistent unit system implied by a length unit.
-#[derive(Debug, Clone, Copy)]
-pub struct UnitSystem {
-    pub length: &'static str,
-    pub force: &'static str,
-    pub stress: &'static str,
-    pub mass: &'static str,
-    /// Stress in deck units per MPa.
-    pub stress_per_mpa: f64,
-    /// Density in deck units per tonne/mm^3.
-    pub density_per_tonne_mm3: f64,
-}
-
-impl UnitSystem {
-    pub fn of(unit: LengthUnit) -> Self {
-        match unit {
-            LengthUnit::Um => UnitSystem { length: "um", force: "uN", stress: "MPa", mass: "kg", stress_per_mpa: 1.0, density_per_tonne_mm3: 1e-6 },
-            LengthUnit::Mm => UnitSystem { length: "mm", force: "N", stress: "MPa", mass: "tonne", stress_per_mpa: 1.0, density_per_tonne_mm3: 1.0 },
-            LengthUnit::Cm => UnitSystem { length: "cm", force: "dyn", stress: "Ba (0.1 Pa)", mass: "g", stress_per_mpa: 1e7, density_per_tonne_mm3: 1e9 },
-            LengthUnit::M => UnitSystem { length: "m", force: "N", stress: "Pa", mass: "kg", stress_per_mpa: 1e6, density_per_tonne_mm3: 1e12 },
-        }
-    }
-    pub fn describe(&self) -> String {
-        format!("length {}, force {}, stress {}, mass {}, time s", self.length, self.force, self.stress, self.mass)
-    }
-}
-
 /// A real number for a data line: 13 significant digits, at most 20 characters.
 pub fn fmt_coord(x: f64) -> String {
     let x = if x == 0.0 { 0.0 } else { x }; // no "-0"
@@ -419,7 +392,7 @@ struct Deck<'a> {
     dialect: Dialect,
     element: ElementType,
     scale: f64,
-    units: UnitSystem,
+    units: MechanicalUnits,
     nodes: Vec<u32>,
     mids: Option<MidEdges>,
     node_sets: Vec<(String, Vec<u64>)>,
@@ -478,7 +451,7 @@ impl<'a> Deck<'a> {
         if wall.is_empty() {
             return Err(Error::Geometry("the mesh has no wall elements: nothing to write to an Abaqus/CalculiX deck".into()));
         }
-        let units = UnitSystem::of(options.length_unit);
+        let units = MechanicalUnits::of(options.length_unit);
         let scale = options.length_unit.from_mm();
         let nodes = mesh.nodes_of(wall.clone());
         let mids = element.is_quadratic().then(|| MidEdges::new(mesh));
@@ -559,13 +532,13 @@ impl<'a> Deck<'a> {
                 (_, MaterialModel::LinearElastic) => format!("LINEAR_{layer_name}"),
             };
             let (fx, fy) = fibre_local(beta_deg);
-            let s = units.stress_per_mpa;
+            let s = |mpa: f64| units.stress_from_mpa(mpa);
             let values = [
                 ("LAYER", layer_name.clone()),
                 ("MATERIAL", material_name.clone()),
-                ("C10", fmt_const(m.c10 * s)),
-                ("D", fmt_const(m.d / s)),
-                ("K1", fmt_const(m.k1 * s)),
+                ("C10", fmt_const(s(m.c10))),
+                ("D", fmt_const(1.0 / s(1.0 / m.d))),
+                ("K1", fmt_const(s(m.k1))),
                 ("K2", fmt_const(m.k2)),
                 ("KAPPA", fmt_const(m.kappa)),
                 ("FIBRE1_X", fmt_const(fx)),
@@ -573,9 +546,9 @@ impl<'a> Deck<'a> {
                 ("FIBRE2_X", fmt_const(fx)),
                 ("FIBRE2_Y", fmt_const(-fy)),
                 ("BETA_DEG", fmt_const(beta_deg)),
-                ("E", fmt_const(m.youngs_modulus * s)),
+                ("E", fmt_const(s(m.youngs_modulus))),
                 ("NU", fmt_const(m.poisson_ratio)),
-                ("DENSITY", fmt_const(m.density * units.density_per_tonne_mm3)),
+                ("DENSITY", fmt_const(units.density_from_tonne_mm3(m.density))),
                 ("UNITS", units.describe()),
             ];
             let material_text = render(&mat_text, &mat_source, &values)?;
@@ -588,7 +561,7 @@ impl<'a> Deck<'a> {
             &step_text,
             &step_source,
             &[
-                ("PRESSURE", fmt_const(fe.pressure_mmhg * MMHG_IN_MPA * units.stress_per_mpa)),
+                ("PRESSURE", fmt_const(units.stress_from_mpa(fe.pressure_mmhg * MMHG_IN_MPA))),
                 ("PRESSURE_MMHG", fmt_const(fe.pressure_mmhg)),
                 ("PRESSURE_SURFACE", pressure_surface),
                 ("PRINT_NSET", "LUMEN_RING".to_string()),
