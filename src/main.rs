@@ -32,7 +32,7 @@ enum Command {
 
 const MESH_HELP: &str = "Mesh a vessel: lumen (core + four lateral blocks per cross-section, rays cast from the core \
 to an outer circle and intersected with the surface, graded towards the wall) and a three-layer wall (intima, media, \
-adventitia) grown along the same rays, with per-element triads, collagen fibres and quality figures.
+adventitia) grown from the lumen surface along its normal (or along the rays), with per-element triads, collagen fibres and quality figures.
 
 Parameters come from the preset, then the case file (--config, TOML), then these flags. Case-file keys (see README):
   preset, units, output_units, formats
@@ -45,8 +45,7 @@ Parameters come from the preset, then the case file (--config, TOML), then these
   [fe] abaqus_element, calculix_element, material, template_dir, pressure_mmhg, [fe.<layer>]
   [febio] lumen_pressure_mmhg, static_steps, [febio.<layer>], [febio.blood], [febio.fsi]
 
-Formats (--formats): vtu, calculix, abaqus, febio, febio-fsi, openfoam, openfoam-fsi, fsi (implies openfoam
-and calculix).
+Formats (--formats): vtu, calculix, abaqus, febio, febio-fsi, openfoam, openfoam-fsi, fsi (implies openfoam and calculix).
 Outputs in --output: the formats' files and report.json (counts, quality, surface accuracy, timings).";
 
 #[derive(Args)]
