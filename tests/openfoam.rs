@@ -342,22 +342,7 @@ fn poiseuille_pressure_drop_and_flow_balance() {
     let case = write(&mesh, "openfoam", &options, &dir);
     let poly = read_polymesh(&case).unwrap();
 
-    let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
-    let started = std::time::Instant::now();
-    let out = Command::new("sh")
-        .arg(case.join("Allrun"))
-        .env("WM_PROJECT_DIR", wm)
-        .env("OMP_NUM_THREADS", "1")
-        .output()
-        .unwrap();
-    let seconds = started.elapsed().as_secs_f64();
-    let log = std::fs::read_to_string(case.join("log.simpleFoam")).unwrap_or_default();
-    assert!(
-        out.status.success(),
-        "Allrun failed: {}{}\n{log}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let (log, seconds) = allrun(&case, "simpleFoam");
     let converged = log.lines().find(|l| l.contains("solution converged in"));
     assert!(converged.is_some(), "simpleFoam did not converge:\n{}", &log[log.len().saturating_sub(3000)..]);
     let time = latest_time(&case);
