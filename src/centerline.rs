@@ -57,12 +57,34 @@ pub struct CenterlineSample {
 }
 
 /// A branch: from its start (the inlet, or a junction) to its end (an outlet, or a junction).
+/// Samples run in the direction of the flow (inlet towards outlets). A branch that ends at a
+/// junction ends exactly at the junction's centre; a branch that starts at one starts there.
 #[derive(Debug, Clone)]
 pub struct Branch {
     pub name: String,
+    /// The branch upstream (None for the inlet branch).
     pub parent: Option<usize>,
+    /// The branches that leave this one's downstream end.
     pub daughters: Vec<usize>,
     pub samples: Vec<CenterlineSample>,
+    /// Junction at the upstream end (None: the vessel's inlet).
+    pub start_junction: Option<usize>,
+    /// Junction at the downstream end (None: an outlet).
+    pub end_junction: Option<usize>,
+}
+
+/// Where a parent branch splits into two or more daughters.
+#[derive(Debug, Clone)]
+pub struct Junction {
+    /// Centre of the junction: the point shared by the parent's last and the daughters' first
+    /// samples, mm.
+    pub centre: Point3<f64>,
+    /// Maximal inscribed sphere radius at the centre, mm.
+    pub radius: f64,
+    /// The branch that ends here.
+    pub parent: usize,
+    /// The branches that start here, in a stable order.
+    pub daughters: Vec<usize>,
 }
 
 impl Branch {
@@ -92,10 +114,12 @@ impl Branch {
     }
 }
 
-/// All branches of a vessel. Branch 0 starts at the inlet.
+/// All branches of a vessel and the junctions between them. Branch 0 starts at the inlet;
+/// a parent always comes before its daughters.
 #[derive(Debug, Clone)]
 pub struct CenterlineTree {
     pub branches: Vec<Branch>,
+    pub junctions: Vec<Junction>,
 }
 
 impl CenterlineTree {
@@ -119,7 +143,7 @@ impl CenterlineTree {
             }
         }
         let branch = build_branch("branch_0", &centerlines.polylines[0], config, path)?;
-        Ok(CenterlineTree { branches: vec![branch] })
+        Ok(CenterlineTree { branches: vec![branch], junctions: vec![] })
     }
 }
 
@@ -183,7 +207,7 @@ fn build_branch(
             CenterlineSample { s, point: pts[i], radius: rad[i], frame: frames[i] }
         })
         .collect();
-    Ok(Branch { name: name.to_string(), parent: None, daughters: vec![], samples })
+    Ok(Branch { name: name.to_string(), parent: None, daughters: vec![], samples, start_junction: None, end_junction: None })
 }
 
 /// Uniform resampling by arc length with a step close to `step`.
