@@ -10,7 +10,7 @@
 use crate::centerline::Branch;
 use crate::error::Result;
 use crate::mesh::{face_nodes, sets, VesselMesh};
-use crate::projection::ProjectedBranch;
+use crate::projection::{BranchEnd, ProjectedBranch};
 use crate::surface::LumenSurface;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
@@ -52,8 +52,8 @@ pub fn node_distances(mesh: &VesselMesh, surface: &LumenSurface) -> Vec<f64> {
 pub fn surface_accuracy(
     mesh: &VesselMesh,
     surface: &LumenSurface,
-    branch: &Branch,
-    projected: &ProjectedBranch,
+    branches: &[Branch],
+    projected: &[ProjectedBranch],
 ) -> Result<SurfaceAccuracy> {
     let node_d = node_distances(mesh, surface);
 
@@ -72,23 +72,36 @@ pub fn surface_accuracy(
     }
     let meshed = LumenSurface::from_parts(mesh.nodes.clone(), tris, "meshed lumen surface".into())?;
 
-    // Input vertices inside the meshed stretch: their nearest centerline sample lies between
-    // the first and last sections, and they lie between the two end planes.
-    let samples: Vec<[f64; 3]> = branch.samples.iter().map(|s| [s.point.x, s.point.y, s.point.z]).collect();
-    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&samples).map_err(|e| {
-        crate::error::Error::Geometry(format!("cannot index the centerline of {}: {e:?}", branch.name))
-    })?;
-    let first = &projected.sections[0].station;
-    let last = &projected.sections[projected.sections.len() - 1].station;
+    // Input vertices inside the meshed part: their nearest centerline sample (over every
+    // branch) lies within the meshed stretch of its branch, and they lie on the inner side of
+    // the end planes of that branch's vessel ends. Junction ends are meshed up to the centre.
+    let mut samples: Vec<[f64; 3]> = Vec::new();
+    let mut owner: Vec<(usize, f64)> = Vec::new();
+    for (b, branch) in branches.iter().enumerate() {
+        for s in &branch.samples {
+            samples.push([s.point.x, s.point.y, s.point.z]);
+            owner.push((b, s.s));
+        }
+    }
+    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&samples)
+        .map_err(|e| crate::error::Error::Geometry(format!("cannot index the centerlines: {e:?}")))?;
     let inside: Vec<usize> = (0..surface.vertices.len())
         .filter(|&i| {
             let v = surface.vertices[i];
             let nn = tree.query(&[v.x, v.y, v.z]).nearest_one::<SquaredEuclidean<f64>>().execute();
-            let s = branch.samples[nn.item as usize].s;
-            s >= projected.s_start
-                && s <= projected.s_end
-                && (v - first.point).dot(&first.frame.tangent) >= 0.0
-                && (v - last.point).dot(&last.frame.tangent) <= 0.0
+            let (b, s) = owner[nn.item as usize];
+            let p = projected.iter().find(|p| p.branch == b).expect("every branch is projected");
+            let first = &p.sections[0].station;
+            let last = &p.sections[p.sections.len() - 1].station;
+            let start_ok = match p.start {
+                BranchEnd::Vessel { .. } => s >= p.s_start && (v - first.point).dot(&first.frame.tangent) >= 0.0,
+                BranchEnd::Fold(_) => true,
+            };
+            let end_ok = match p.end {
+                BranchEnd::Vessel { .. } => s <= p.s_end && (v - last.point).dot(&last.frame.tangent) <= 0.0,
+                BranchEnd::Fold(_) => true,
+            };
+            start_ok && end_ok
         })
         .collect();
     let vert_d: Vec<f64> = inside.par_iter().map(|&i| meshed.closest(&surface.vertices[i]).distance).collect();

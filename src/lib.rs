@@ -13,6 +13,7 @@ pub mod centerline_extract;
 pub mod config;
 pub mod error;
 pub mod input;
+pub mod junction;
 pub mod mesh;
 pub mod pipeline;
 pub mod progress;

@@ -10,7 +10,9 @@ use crate::error::{Error, Result};
 use crate::input::{read_centerlines, read_surface, Centerlines, TriangleSurface};
 use crate::mesh::VesselMesh;
 use crate::progress::Progress;
-use crate::projection::{project_branch, ProjectedBranch};
+use crate::centerline::Branch;
+use crate::junction::{analyse_junctions, fold_normal, signed_angle, transition_length, twist_frames, FoldEnd, JunctionGeometry};
+use crate::projection::{project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
 use crate::report::{lumen_report, wall_report, BranchReport, InputReport, Report};
 use crate::surface::LumenSurface;
 use crate::volume::{build_volume, RadialLevels};
@@ -25,6 +27,79 @@ pub struct Meshed {
     pub projected: Vec<ProjectedBranch>,
     pub accuracy: SurfaceAccuracy,
     pub template: SectionTemplate,
+    pub junctions: Vec<JunctionGeometry>,
+}
+
+/// A branch ready for projection: its frames turned to meet its junctions' folds, and what
+/// lies at each end (junction, fold, transition length).
+struct BranchPlan {
+    branch: Branch,
+    start: Option<(usize, FoldEnd, f64)>,
+    end: Option<(usize, FoldEnd, f64)>,
+}
+
+/// Turns every branch's frames so that its template lies on the folds of its junctions: a
+/// constant turn when one end meets a junction; between two junctions, the nearest quarter turn
+/// at the downstream one and the rest spread linearly along the branch.
+fn plan_branches(tree: &CenterlineTree, junctions: &[JunctionGeometry]) -> Vec<BranchPlan> {
+    tree.branches
+        .iter()
+        .enumerate()
+        .map(|(b, branch)| {
+            let mut branch = branch.clone();
+            let len = branch.length();
+            let at_junction = |j: Option<usize>| {
+                j.map(|j| {
+                    let g = &junctions[j];
+                    let slot = g.slot_of(b);
+                    (j, slot, transition_length(g, slot))
+                })
+            };
+            let start = at_junction(branch.start_junction);
+            let end = at_junction(branch.end_junction);
+            let turn_needed = |s: f64, j: usize, q: u8| {
+                let f = branch.at(s).frame;
+                let want = fold_normal(&junctions[j].axis, &f.tangent, q);
+                signed_angle(&f.normal, &want, &f.tangent)
+            };
+            let s0 = start.map_or(0.0, |(_, _, l)| l);
+            let s1 = end.map_or(len, |(_, _, l)| len - l);
+            let phi0 = start.map(|(j, _, _)| turn_needed(s0, j, 0));
+            let (phi1, q_end) = match end {
+                None => (None, 0),
+                Some((j, _, _)) => {
+                    let base = phi0.unwrap_or(0.0);
+                    let q = if phi0.is_some() {
+                        (0..4u8)
+                            .min_by(|&a, &b| {
+                                let d = |q| (turn_needed(s1, j, q) - base + std::f64::consts::PI)
+                                    .rem_euclid(std::f64::consts::TAU)
+                                    - std::f64::consts::PI;
+                                d(a).abs().total_cmp(&d(b).abs())
+                            })
+                            .unwrap()
+                    } else {
+                        0
+                    };
+                    let raw = turn_needed(s1, j, q);
+                    let unwrapped = base + (raw - base + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                        - std::f64::consts::PI;
+                    (Some(unwrapped), q)
+                }
+            };
+            match (phi0, phi1) {
+                (Some(a), Some(e)) => twist_frames(&mut branch, s0, a, s1, e),
+                (Some(a), None) => twist_frames(&mut branch, s0, a, s1, a),
+                (None, Some(e)) => twist_frames(&mut branch, s0, e, s1, e),
+                (None, None) => {}
+            }
+            BranchPlan {
+                branch,
+                start: start.map(|(j, slot, l)| (j, FoldEnd { junction: j, slot, quarter_turns: 0 }, l)),
+                end: end.map(|(j, slot, l)| (j, FoldEnd { junction: j, slot, quarter_turns: q_end }, l)),
+            }
+        })
+        .collect()
 }
 
 /// Radius and surface distance must agree to within this factor, or the units differ.
@@ -109,17 +184,36 @@ pub fn mesh_vessel(
     progress.stage("projection");
     let l = &config.lumen;
     let template = SectionTemplate::new(l.core_elements, l.core_size, l.ray_reach);
-    let branch = &tree.branches[0];
+    let junctions = analyse_junctions(&tree, &lumen_surface)?;
+    if !junctions.is_empty() && l.core_elements % 2 != 0 {
+        return Err(Error::Config(format!(
+            "lumen.core_elements = {} is odd: a branching vessel needs an even number (the junction's spine runs \
+             along the middle grid line of the core); use {}",
+            l.core_elements,
+            l.core_elements + 1
+        )));
+    }
     let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
-    let projected = project_branch(
-        branch,
-        &template,
-        &lumen_surface,
-        &spacing,
-        config.centerline.trim_inlet,
-        config.centerline.trim_outlet,
+    let setup = ProjectionSetup {
+        template: &template,
+        surface: &lumen_surface,
+        spacing: &spacing,
+        trim_inlet: config.centerline.trim_inlet,
+        trim_outlet: config.centerline.trim_outlet,
         normals_outward,
-    )?;
+    };
+    let plans = plan_branches(&tree, &junctions);
+    let projected: Vec<ProjectedBranch> = plans
+        .iter()
+        .enumerate()
+        .map(|(b, plan)| {
+            let end = |e: &Option<(usize, FoldEnd, f64)>| {
+                e.map(|(j, fold, length)| JunctionEnd { geometry: &junctions[j], fold, transition_length: length })
+            };
+            let (start, finish) = (end(&plan.start), end(&plan.end));
+            project_branch(&plan.branch, b, &setup, start.as_ref(), finish.as_ref())
+        })
+        .collect::<Result<_>>()?;
 
     progress.stage("volume");
     let ratio = match l.first_cell_height {
@@ -130,7 +224,8 @@ pub fn mesh_vessel(
     let levels = RadialLevels::new(graded_levels(l.radial_elements, ratio), &layers);
     let w = &config.wall;
     let thickness = |r: f64| w.thickness_mm.unwrap_or(w.thickness_ratio * r);
-    let mut mesh = build_volume(&projected, &template, &levels, &layers, &thickness, w.growth);
+    let names = tree.branches.iter().map(|b| b.name.clone()).collect();
+    let mut mesh = build_volume(&projected, &template, &junctions, &levels, &layers, &thickness, w.growth, names);
 
     progress.stage("annotation");
     annotate(&mut mesh);
@@ -151,8 +246,9 @@ pub fn mesh_vessel(
     }
 
     progress.stage("surface accuracy");
-    let accuracy = surface_accuracy(&mesh, &lumen_surface, branch, &projected)?;
-    Ok(Meshed { mesh, tree, projected: vec![projected], accuracy, template })
+    let aligned: Vec<Branch> = plans.into_iter().map(|p| p.branch).collect();
+    let accuracy = surface_accuracy(&mesh, &lumen_surface, &aligned, &projected)?;
+    Ok(Meshed { mesh, tree, projected, accuracy, template, junctions })
 }
 
 /// Everything `vesselhex mesh` was asked.

@@ -9,7 +9,8 @@
 //! place and the cause.
 
 use crate::blocks::SectionTemplate;
-use crate::centerline::{Branch, CenterlineSample};
+use crate::centerline::{Branch, CenterlineSample, Frame};
+use crate::junction::{transition_points, FoldEnd, JunctionGeometry};
 use crate::error::{Error, Result};
 use crate::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
@@ -27,6 +28,8 @@ const CLOSED_END_MARGIN: f64 = 0.5;
 #[derive(Debug, Clone)]
 pub struct ProjectedSection {
     pub station: CenterlineSample,
+    /// Every core grid node (template order).
+    pub core: Vec<Point3<f64>>,
     /// Ray origins on the core square boundary, one per ring point.
     pub origins: Vec<Point3<f64>>,
     /// Unit ray directions (towards the outer block surface).
@@ -35,18 +38,40 @@ pub struct ProjectedSection {
     pub surface: Vec<Point3<f64>>,
 }
 
-/// A branch's stations, all projected.
+/// What lies at one end of a meshed branch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BranchEnd {
+    /// An inlet or outlet of the vessel, closed (capped) or open.
+    Vessel { closed: bool },
+    /// A junction: the end section is folded onto the junction's pages.
+    Fold(FoldEnd),
+}
+
+/// A branch's stations, all projected, in the direction of the flow.
 #[derive(Debug, Clone)]
 pub struct ProjectedBranch {
+    /// Index of the branch in the centerline tree.
+    pub branch: usize,
     pub sections: Vec<ProjectedSection>,
-    /// Arc lengths where the mesh starts and ends.
+    /// Arc lengths where the ordinary sections start and end (at a junction, where the
+    /// transition towards the folded section begins).
     pub s_start: f64,
     pub s_end: f64,
+    pub start: BranchEnd,
+    pub end: BranchEnd,
     /// Whether each end of the surface was found closed (capped) rather than open.
     pub inlet_closed: bool,
     pub outlet_closed: bool,
     /// Whether the surface's triangles face out of the lumen (they may face in).
     pub normals_outward: bool,
+}
+
+/// A junction end of a branch, as the projection needs it.
+pub struct JunctionEnd<'a> {
+    pub geometry: &'a JunctionGeometry,
+    pub fold: FoldEnd,
+    /// Arc length between the junction centre and the last ordinary section, mm.
+    pub transition_length: f64,
 }
 
 /// What the rays of one section found.
@@ -75,12 +100,14 @@ fn where_(s: &CenterlineSample) -> String {
     )
 }
 
-/// Casts the rays of one station. `orientation` is +1 when triangle normals face out of the
-/// lumen, -1 when they face in.
-fn cast_section(
+/// Casts rays from the core boundary of a section towards their targets. `orientation` is +1
+/// when triangle normals face out of the lumen, -1 when they face in.
+fn cast_rays(
     template: &SectionTemplate,
     surface: &LumenSurface,
     station: &CenterlineSample,
+    core: Vec<Point3<f64>>,
+    targets: &[Point3<f64>],
     orientation: f64,
 ) -> (Probe, ProjectedSection) {
     let m = template.ring_len();
@@ -90,9 +117,13 @@ fn cast_section(
         origins: Vec::with_capacity(m),
         dirs: Vec::with_capacity(m),
         surface: Vec::with_capacity(m),
+        core,
     };
-    for k in 0..m {
-        let (origin, dir, len) = template.ray(station, k);
+    for (k, target) in targets.iter().enumerate() {
+        let origin = section.core[template.ring_core_index[k]];
+        let d = target - origin;
+        let len = d.norm();
+        let dir = d / len;
         match surface.first_hit(&origin, &dir, len * RAY_SLACK) {
             Some(hit) => {
                 let n = surface.normals[hit.triangle as usize];
@@ -113,29 +144,75 @@ fn cast_section(
     (probe, section)
 }
 
-/// Finds the meshable part of a branch and projects its stations.
-pub fn project_branch(
-    branch: &Branch,
+/// Casts the rays of an ordinary station.
+fn cast_section(
     template: &SectionTemplate,
     surface: &LumenSurface,
-    spacing: &(dyn Fn(&CenterlineSample) -> f64 + Sync),
-    trim_inlet: f64,
-    trim_outlet: f64,
-    normals_outward: bool,
+    station: &CenterlineSample,
+    orientation: f64,
+) -> (Probe, ProjectedSection) {
+    let core = template.core.iter().map(|c| template.place(station, c)).collect();
+    let targets: Vec<Point3<f64>> =
+        template.target_dir.iter().map(|d| template.place(station, &(d * template.ray_reach))).collect();
+    cast_rays(template, surface, station, core, &targets, orientation)
+}
+
+/// Everything `project_branch` needs besides the branch.
+pub struct ProjectionSetup<'a> {
+    pub template: &'a SectionTemplate,
+    pub surface: &'a LumenSurface,
+    pub spacing: &'a (dyn Fn(&CenterlineSample) -> f64 + Sync),
+    pub trim_inlet: f64,
+    pub trim_outlet: f64,
+    pub normals_outward: bool,
+}
+
+/// Finds the meshable part of a branch and projects its stations: ordinary sections between
+/// the vessel's ends (trimmed as the surface requires) or the transitions towards junctions,
+/// then the transition sections down to each folded end.
+pub fn project_branch(
+    branch: &Branch,
+    index: usize,
+    setup: &ProjectionSetup,
+    start_junction: Option<&JunctionEnd>,
+    end_junction: Option<&JunctionEnd>,
 ) -> Result<ProjectedBranch> {
+    let ProjectionSetup { template, surface, spacing, trim_inlet, trim_outlet, normals_outward } = *setup;
     let samples = &branch.samples;
     let orient = if normals_outward { 1.0 } else { -1.0 };
-    let probes: Vec<Probe> = samples.par_iter().map(|s| cast_section(template, surface, s, orient).0).collect();
+    let length = branch.length();
+    let lo = start_junction.map_or(0.0, |j| j.transition_length);
+    let hi = end_junction.map_or(length, |j| length - j.transition_length);
+    let name = &branch.name;
+    if hi - lo < 0.25 * (samples[0].radius + samples[samples.len() - 1].radius) {
+        let what = match (start_junction, end_junction) {
+            (Some(_), Some(_)) => "between its two junctions",
+            (Some(_), None) => "between its junction and its outlet",
+            (None, Some(_)) => "between the inlet and its junction",
+            (None, None) => "",
+        };
+        return Err(Error::Geometry(format!(
+            "{}: branch {name} is too short {what} ({length:.2} mm long, {:.2} mm needed for the junctions' \
+             transitions): the junctions should be merged (centerline.junction_merge_radii) or the branch is \
+             not a vessel",
+            surface.source.display(),
+            length - (hi - lo) + 0.0
+        )));
+    }
+    // Only the samples away from junctions decide where a vessel end is clean.
+    let inside: Vec<usize> = (0..samples.len()).filter(|&i| samples[i].s >= lo && samples[i].s <= hi).collect();
+    let probes: Vec<(usize, Probe)> =
+        inside.par_iter().map(|&i| (i, cast_section(template, surface, &samples[i], orient).0)).collect();
 
-    let first_clean = probes.iter().position(Probe::clean);
-    let last_clean = probes.iter().rposition(Probe::clean);
+    let first_clean = probes.iter().find(|(_, p)| p.clean()).map(|(i, _)| *i);
+    let last_clean = probes.iter().rev().find(|(_, p)| p.clean()).map(|(i, _)| *i);
     let (i0, i1) = match (first_clean, last_clean) {
         (Some(a), Some(b)) if a < b => (a, b),
         _ => {
             let mid = &samples[samples.len() / 2];
-            let p = &probes[samples.len() / 2];
+            let p = cast_section(template, surface, mid, orient).0;
             return Err(Error::Geometry(format!(
-                "{}: no cross-section of the vessel has all its rays meeting the lumen wall from inside (in the \
+                "{}: no cross-section of branch {name} has all its rays meeting the lumen wall from inside (in the \
                  middle of the centerline, {} {} of {} rays miss the surface and {} hit it from outside). The \
                  centerline is not inside this surface: check that both files belong to the same vessel and are \
                  in the same units (--units)",
@@ -147,29 +224,37 @@ pub fn project_branch(
             )));
         }
     };
-    if let Some(bad) = (i0..=i1).find(|&i| !probes[i].valid()) {
-        let p = &probes[bad];
+    // A closed end (every ray of the end sample hits): keep a margin from the cap.
+    let inlet_closed = start_junction.is_none() && probes[0].1.valid();
+    let outlet_closed = end_junction.is_none() && probes[probes.len() - 1].1.valid();
+    let r0 = samples[i0].radius;
+    let r1 = samples[i1].radius;
+    let s_start = match start_junction {
+        Some(_) => lo,
+        None => samples[i0].s + r0 * (trim_inlet + if inlet_closed { CLOSED_END_MARGIN } else { 0.0 }),
+    };
+    let s_end = match end_junction {
+        Some(_) => hi,
+        None => samples[i1].s - r1 * (trim_outlet + if outlet_closed { CLOSED_END_MARGIN } else { 0.0 }),
+    };
+    if let Some((bad, p)) = probes
+        .iter()
+        .find(|(i, p)| samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !p.valid())
+    {
         return Err(Error::Geometry(format!(
-            "{}: the cross-section {} does not close: {} of {} rays miss the lumen surface and {} meet it from \
-             outside. The surface may have a hole there, or the centerline leaves the lumen; repair the surface \
-             or smooth the centerline (centerline.smoothing_passes)",
+            "{}: the cross-section of branch {name} {} does not close: {} of {} rays miss the lumen surface and {} \
+             meet it from outside. The surface may have a hole there, or the centerline leaves the lumen; repair \
+             the surface or smooth the centerline (centerline.smoothing_passes)",
             surface.source.display(),
-            where_(&samples[bad]),
+            where_(&samples[*bad]),
             p.misses,
             template.ring_len(),
             p.from_outside
         )));
     }
-    // A closed end (every ray of the end sample hits): keep a margin from the cap.
-    let inlet_closed = probes[0].valid();
-    let outlet_closed = probes[probes.len() - 1].valid();
-    let r0 = samples[i0].radius;
-    let r1 = samples[i1].radius;
-    let s_start = samples[i0].s + r0 * (trim_inlet + if inlet_closed { CLOSED_END_MARGIN } else { 0.0 });
-    let s_end = samples[i1].s - r1 * (trim_outlet + if outlet_closed { CLOSED_END_MARGIN } else { 0.0 });
     if s_end - s_start < 0.5 * (r0 + r1) {
         return Err(Error::Geometry(format!(
-            "{}: only {:.3} mm of the centerline (from {:.2} to {:.2} mm) has clean cross-sections, too short to \
+            "{}: only {:.3} mm of branch {name} (from {:.2} to {:.2} mm) has clean cross-sections, too short to \
              mesh; reduce centerline.trim_inlet/trim_outlet or check the surface's ends",
             surface.source.display(),
             (s_end - s_start).max(0.0),
@@ -181,18 +266,100 @@ pub fn project_branch(
     let positions = crate::blocks::station_positions(s_start, s_end, |s| spacing(&branch.at(s)));
     let sections: Vec<(Probe, ProjectedSection)> =
         positions.par_iter().map(|&s| cast_section(template, surface, &branch.at(s), orient)).collect();
-    let mut out = Vec::with_capacity(sections.len());
+    let mut ordinary = Vec::with_capacity(sections.len());
     for (probe, section) in sections {
         if !probe.valid() {
             return Err(Error::Geometry(format!(
-                "{}: ray cast failed for the station {}: {} rays miss the surface, {} meet it from outside",
+                "{}: ray cast failed for the station of branch {name} {}: {} rays miss the surface, {} meet it \
+                 from outside",
                 surface.source.display(),
                 where_(&section.station),
                 probe.misses,
                 probe.from_outside
             )));
         }
+        ordinary.push(section);
+    }
+
+    let mut out = Vec::new();
+    if let Some(j) = start_junction {
+        let mut t = transition(j, &ordinary[0].station, -1.0, setup, branch)?;
+        t.reverse();
+        out.extend(t);
+    }
+    out.extend(ordinary);
+    if let Some(j) = end_junction {
+        let last = out[out.len() - 1].station;
+        out.extend(transition(j, &last, 1.0, setup, branch)?);
+    }
+    let start = match start_junction {
+        Some(j) => BranchEnd::Fold(j.fold),
+        None => BranchEnd::Vessel { closed: inlet_closed },
+    };
+    let end = match end_junction {
+        Some(j) => BranchEnd::Fold(j.fold),
+        None => BranchEnd::Vessel { closed: outlet_closed },
+    };
+    Ok(ProjectedBranch {
+        branch: index,
+        sections: out,
+        s_start,
+        s_end,
+        start,
+        end,
+        inlet_closed,
+        outlet_closed,
+        normals_outward,
+    })
+}
+
+/// The sections of a transition from an ordinary station (excluded) to the folded end
+/// (included), in that order. `sense` is +1 when the junction lies downstream of the station.
+fn transition(
+    j: &JunctionEnd,
+    station: &CenterlineSample,
+    sense: f64,
+    setup: &ProjectionSetup,
+    branch: &Branch,
+) -> Result<Vec<ProjectedSection>> {
+    let template = setup.template;
+    let g = j.geometry;
+    let towards = station.frame.tangent * sense;
+    let h = (setup.spacing)(station);
+    let cells = ((j.transition_length / h).round() as usize).max(2);
+    let params: Vec<f64> = (1..=cells).map(|i| i as f64 / cells as f64).collect();
+    let points = transition_points(g, &j.fold, template, station, &towards, &params);
+    let orient = if setup.normals_outward { 1.0 } else { -1.0 };
+    let mut out = Vec::with_capacity(cells);
+    for (u, p) in params.iter().zip(points) {
+        let next = if *u < 1.0 { p.centre } else { g.centre };
+        let radius = station.radius + (g.radius - station.radius) * u;
+        let s = station.s + sense * j.transition_length * u;
+        let st = CenterlineSample {
+            s,
+            point: next,
+            radius,
+            frame: Frame::from_tangent_and_hint(station.frame.tangent, station.frame.normal),
+        };
+        let (probe, section) = cast_rays(template, setup.surface, &st, p.core, &p.targets, orient);
+        if !probe.valid() {
+            return Err(Error::Geometry(format!(
+                "{}: branch {} at the junction at ({:.3}, {:.3}, {:.3}) mm: in the transition section {:.0} % of \
+                 the way to the junction, {} of {} rays miss the lumen wall and {} meet it from outside. The \
+                 branches leave the junction at a shape the book of pages cannot follow (a bulb or a stenosis at \
+                 the junction); smooth the centerlines or lengthen the transition (mesh the junction finer)",
+                setup.surface.source.display(),
+                branch.name,
+                g.centre.x,
+                g.centre.y,
+                g.centre.z,
+                u * 100.0,
+                probe.misses,
+                template.ring_len(),
+                probe.from_outside
+            )));
+        }
         out.push(section);
     }
-    Ok(ProjectedBranch { sections: out, s_start, s_end, inlet_closed, outlet_closed, normals_outward })
+    Ok(out)
 }

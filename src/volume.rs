@@ -8,13 +8,15 @@
 
 use crate::blocks::SectionTemplate;
 use crate::config::WallGrowth;
+use crate::junction::{FoldKey, JunctionGeometry};
 use crate::mesh::{
     sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, WallLayer, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER,
     FACE_UPSTREAM,
 };
-use crate::projection::ProjectedBranch;
+use crate::projection::{BranchEnd, ProjectedBranch};
 use indexmap::IndexMap;
-use nalgebra::Vector3;
+use nalgebra::{Point3, Vector3};
+use std::collections::{BTreeMap, HashMap};
 
 /// Radial structure shared by all stations.
 #[derive(Debug, Clone)]
@@ -50,209 +52,295 @@ impl RadialLevels {
     }
 }
 
-/// Index arithmetic of the structured node grid of one branch.
-struct Grid<'a> {
-    t: &'a SectionTemplate,
-    lumen_cells: usize,
-    wall_cells: usize,
+/// Node numbering of one branch: for each station, its core nodes then its lumen ring levels
+/// 1..=R (level R is the lumen surface). Ring level 0 is the core boundary.
+struct BranchNodes {
+    /// Per station: (N+1)^2 core ids then R * ring ids.
+    stations: Vec<Vec<u32>>,
 }
 
-impl Grid<'_> {
-    fn core_count(&self) -> usize {
-        (self.t.n + 1) * (self.t.n + 1)
-    }
-    fn per_station(&self) -> usize {
-        self.core_count() + self.t.ring_len() * (self.lumen_cells + self.wall_cells)
-    }
-    /// Node at station `i`, ring level `level` (0 = core boundary, R = surface, R + m = wall
-    /// level m) and ring point `k` (taken modulo the ring).
-    fn ring(&self, i: usize, level: usize, k: usize) -> u32 {
-        let m = self.t.ring_len();
-        let k = k % m;
-        let local = if level == 0 {
-            self.t.ring_core_index[k]
-        } else {
-            self.core_count() + (level - 1) * m + k
-        };
-        (i * self.per_station() + local) as u32
-    }
-    fn core(&self, i: usize, c: usize) -> u32 {
-        (i * self.per_station() + c) as u32
-    }
-    /// Hex between stations i, i+1 spanning ring levels level, level+1 and ring points k, k+1;
-    /// canonical order: radial x circumferential = axial, so the Jacobian is positive.
-    fn ring_hex(&self, i: usize, level: usize, k: usize) -> Hex {
-        [
-            self.ring(i, level, k),
-            self.ring(i, level + 1, k),
-            self.ring(i, level + 1, k + 1),
-            self.ring(i, level, k + 1),
-            self.ring(i + 1, level, k),
-            self.ring(i + 1, level + 1, k),
-            self.ring(i + 1, level + 1, k + 1),
-            self.ring(i + 1, level, k + 1),
-        ]
-    }
-}
-
-/// Builds nodes, hexes, regions and sets of an unbranched vessel. Triads, fibres and quality
-/// are filled in by [`crate::annotate`].
+/// Builds nodes, hexes, regions and sets of a vessel from its projected branches (one for an
+/// unbranched vessel). Triads, fibres and quality are filled in by [`crate::annotate`].
+///
+/// Nodes of a folded end section are shared between the branches of a junction through their
+/// [`FoldKey`]; the wall grows from the lumen-surface nodes once per node, so the junction's
+/// lumen and wall are conformal by construction.
 pub fn build_volume(
-    projected: &ProjectedBranch,
+    projected: &[ProjectedBranch],
     template: &SectionTemplate,
+    junctions: &[JunctionGeometry],
     levels: &RadialLevels,
     layers: &[WallLayer],
     wall_thickness: &dyn Fn(f64) -> f64,
     wall_growth: WallGrowth,
+    branch_names: Vec<String>,
 ) -> VesselMesh {
-    let grid = Grid { t: template, lumen_cells: levels.lumen_cells(), wall_cells: levels.wall_cells() };
-    let stations = projected.sections.len();
+    let n = template.n;
     let m = template.ring_len();
-    let r_cells = grid.lumen_cells;
+    let r_cells = levels.lumen_cells();
+    let w_cells = levels.wall_cells();
+    let core_count = (n + 1) * (n + 1);
 
-    // Nodes, station by station: core, lumen rings, then the wall grown from the surface nodes.
-    let growth: Vec<Vec<Vector3<f64>>> = match wall_growth {
-        WallGrowth::Ray => projected.sections.iter().map(|s| s.dirs.clone()).collect(),
-        WallGrowth::Normal => surface_normals(projected),
-    };
-    let mut nodes = Vec::with_capacity(stations * grid.per_station());
-    for (sec, dirs) in projected.sections.iter().zip(&growth) {
-        for c in &template.core {
-            nodes.push(template.place(&sec.station, c));
-        }
-        for &rho in &levels.lumen[1..] {
-            for (a, b) in sec.origins.iter().zip(&sec.surface) {
-                // The surface level is the hit point itself, bit for bit.
-                nodes.push(if rho == 1.0 { *b } else { a + (b - a) * rho });
+    // Lumen nodes, branch by branch and station by station; folded sections through the pool.
+    let mut nodes: Vec<Point3<f64>> = Vec::new();
+    let mut pool: HashMap<FoldKey, u32> = HashMap::new();
+    // Per node: the section radius and ray direction it was placed with (surface nodes only).
+    let mut node_radius: Vec<f64> = Vec::new();
+    let mut node_ray: Vec<Vector3<f64>> = Vec::new();
+    let mut branch_nodes: Vec<BranchNodes> = Vec::with_capacity(projected.len());
+    for pb in projected {
+        let last = pb.sections.len() - 1;
+        let mut stations = Vec::with_capacity(pb.sections.len());
+        for (i, sec) in pb.sections.iter().enumerate() {
+            let fold = match (i, pb.start, pb.end) {
+                (0, BranchEnd::Fold(f), _) => Some(f),
+                (i, _, BranchEnd::Fold(f)) if i == last => Some(f),
+                _ => None,
+            };
+            let mut ids = Vec::with_capacity(core_count + r_cells * m);
+            let mut add = |key: Option<FoldKey>, p: Point3<f64>, radius: f64, ray: Vector3<f64>| -> u32 {
+                if let Some(key) = key {
+                    if let Some(&id) = pool.get(&key) {
+                        return id;
+                    }
+                }
+                let id = nodes.len() as u32;
+                nodes.push(p);
+                node_radius.push(radius);
+                node_ray.push(ray);
+                if let Some(key) = key {
+                    pool.insert(key, id);
+                }
+                id
+            };
+            let key = |c: usize, level: usize| {
+                fold.map(|f| FoldKey::new(&junctions[f.junction], &f, n, c % (n + 1), c / (n + 1), level))
+            };
+            for (c, p) in sec.core.iter().enumerate() {
+                ids.push(add(key(c, 0), *p, sec.station.radius, Vector3::zeros()));
             }
+            for (level, &rho) in levels.lumen.iter().enumerate().skip(1) {
+                for k in 0..m {
+                    let (a, b) = (sec.origins[k], sec.surface[k]);
+                    // The surface level is the hit point itself, bit for bit.
+                    let p = if rho == 1.0 { b } else { a + (b - a) * rho };
+                    ids.push(add(key(template.ring_core_index[k], level), p, sec.station.radius, sec.dirs[k]));
+                }
+            }
+            stations.push(ids);
         }
-        let thickness = wall_thickness(sec.station.radius);
-        for &tau in &levels.wall[1..] {
-            for (b, d) in sec.surface.iter().zip(dirs) {
-                nodes.push(b + d * (thickness * tau));
+        branch_nodes.push(BranchNodes { stations });
+    }
+    let lumen_ring = |b: usize, i: usize, level: usize, k: usize| -> u32 {
+        let st = &branch_nodes[b].stations[i];
+        let k = k % m;
+        if level == 0 {
+            st[template.ring_core_index[k]]
+        } else {
+            st[core_count + (level - 1) * m + k]
+        }
+    };
+
+    // The lumen surface as quads, each wound so that its normal leaves the lumen: circumferential
+    // x axial, the ring running counter-clockwise about each branch's flow direction.
+    let mut quads: Vec<[u32; 4]> = Vec::new();
+    for (b, pb) in projected.iter().enumerate() {
+        for i in 0..pb.sections.len() - 1 {
+            for k in 0..m {
+                quads.push([
+                    lumen_ring(b, i, r_cells, k),
+                    lumen_ring(b, i, r_cells, k + 1),
+                    lumen_ring(b, i + 1, r_cells, k + 1),
+                    lumen_ring(b, i + 1, r_cells, k),
+                ]);
             }
         }
     }
+    // Vessel-end stations: their wall nodes stay in the end planes.
+    let mut end_tangent: HashMap<u32, Vector3<f64>> = HashMap::new();
+    for (b, pb) in projected.iter().enumerate() {
+        let last = pb.sections.len() - 1;
+        for (i, is_end) in [(0, matches!(pb.start, BranchEnd::Vessel { .. })), (last, matches!(pb.end, BranchEnd::Vessel { .. }))] {
+            if is_end {
+                for k in 0..m {
+                    end_tangent.insert(lumen_ring(b, i, r_cells, k), pb.sections[i].station.frame.tangent);
+                }
+            }
+        }
+    }
+    let growth = match wall_growth {
+        WallGrowth::Ray => None,
+        WallGrowth::Normal => Some(surface_normals(&nodes, &quads, &node_ray, &end_tangent)),
+    };
 
-    // Elements: lumen (core + lateral), then each wall region.
+    // Wall nodes: W levels above every lumen-surface node, in surface-node order.
+    let mut surface_nodes: Vec<u32> = quads.iter().flatten().copied().collect();
+    surface_nodes.sort_unstable();
+    surface_nodes.dedup();
+    let mut wall_base = vec![u32::MAX; nodes.len()];
+    for &s in &surface_nodes {
+        let p = nodes[s as usize];
+        let dir = match &growth {
+            Some(normals) => normals[&s],
+            None => node_ray[s as usize],
+        };
+        let thickness = wall_thickness(node_radius[s as usize]);
+        wall_base[s as usize] = nodes.len() as u32;
+        for &tau in &levels.wall[1..] {
+            nodes.push(p + dir * (thickness * tau));
+        }
+    }
+    let ring = |b: usize, i: usize, level: usize, k: usize| -> u32 {
+        if level <= r_cells {
+            lumen_ring(b, i, level, k)
+        } else {
+            wall_base[lumen_ring(b, i, r_cells, k) as usize] + (level - r_cells - 1) as u32
+        }
+    };
+    // Hex between stations i, i+1, ring levels level, level+1 and ring points k, k+1; canonical
+    // order: radial x circumferential = axial, so the Jacobian is positive.
+    let ring_hex = |b: usize, i: usize, level: usize, k: usize| -> Hex {
+        [
+            ring(b, i, level, k),
+            ring(b, i, level + 1, k),
+            ring(b, i, level + 1, k + 1),
+            ring(b, i, level, k + 1),
+            ring(b, i + 1, level, k),
+            ring(b, i + 1, level + 1, k),
+            ring(b, i + 1, level + 1, k + 1),
+            ring(b, i + 1, level, k + 1),
+        ]
+    };
+
+    // Vessel ends: the inlet, then the outlets in branch order.
+    let outlets = projected.iter().filter(|p| matches!(p.end, BranchEnd::Vessel { .. })).count();
+    let mut end_names: Vec<(usize, bool, String)> = Vec::new(); // (branch, is_inlet, name)
+    let mut outlet_no = 0;
+    for (b, pb) in projected.iter().enumerate() {
+        if matches!(pb.start, BranchEnd::Vessel { .. }) {
+            end_names.push((b, true, "inlet".to_string()));
+        }
+        if matches!(pb.end, BranchEnd::Vessel { .. }) {
+            outlet_no += 1;
+            let name = if outlets == 1 { "outlet".to_string() } else { format!("outlet_{outlet_no}") };
+            end_names.push((b, false, name));
+        }
+    }
+    let end_name = |b: usize, inlet: bool| -> Option<&str> {
+        end_names.iter().find(|e| e.0 == b && e.1 == inlet).map(|e| e.2.as_str())
+    };
+
+    let ef = |element: usize, face: usize| ElementFace { element: element as u32, face: face as u8 };
+    let mut node_sets: IndexMap<String, Vec<u32>> = IndexMap::new();
+    let mut face_sets: IndexMap<String, Vec<ElementFace>> = IndexMap::new();
+    for key in [sets::LUMEN_WALL_FACES, sets::WALL_LUMEN_FACES, sets::WALL_OUTER_FACES] {
+        face_sets.insert(key.into(), vec![]);
+    }
+    for (_, _, name) in &end_names {
+        face_sets.insert(sets::lumen_end(name), vec![]);
+        face_sets.insert(sets::wall_end(name), vec![]);
+    }
+    let mut add_face = |set: String, e: usize, face: usize| face_sets.get_mut(&set).expect("declared above").push(ef(e, face));
+
+    // Elements: lumen (core + lateral) of every branch, then each wall region.
     let mut hexes: Vec<Hex> = Vec::new();
     let mut regions = Vec::new();
+    let mut branch_of = Vec::new();
     let core_quads = template.core_quads();
-    for i in 0..stations - 1 {
-        for q in &core_quads {
-            hexes.push([
-                grid.core(i, q[0]),
-                grid.core(i, q[1]),
-                grid.core(i, q[2]),
-                grid.core(i, q[3]),
-                grid.core(i + 1, q[0]),
-                grid.core(i + 1, q[1]),
-                grid.core(i + 1, q[2]),
-                grid.core(i + 1, q[3]),
-            ]);
-        }
-        for level in 0..r_cells {
-            for k in 0..m {
-                hexes.push(grid.ring_hex(i, level, k));
+    for (b, pb) in projected.iter().enumerate() {
+        let last = pb.sections.len() - 2;
+        for i in 0..=last {
+            let st = (&branch_nodes[b].stations[i], &branch_nodes[b].stations[i + 1]);
+            let first_of_interval = hexes.len();
+            for q in &core_quads {
+                hexes.push([st.0[q[0]], st.0[q[1]], st.0[q[2]], st.0[q[3]], st.1[q[0]], st.1[q[1]], st.1[q[2]], st.1[q[3]]]);
             }
+            for level in 0..r_cells {
+                for k in 0..m {
+                    if level == r_cells - 1 {
+                        add_face(sets::LUMEN_WALL_FACES.into(), hexes.len(), FACE_OUTER);
+                    }
+                    hexes.push(ring_hex(b, i, level, k));
+                }
+            }
+            for (cond, inlet, face) in [(i == 0, true, FACE_UPSTREAM), (i == last, false, FACE_DOWNSTREAM)] {
+                if let (true, Some(name)) = (cond, end_name(b, inlet)) {
+                    for e in first_of_interval..hexes.len() {
+                        add_face(sets::lumen_end(name), e, face);
+                    }
+                }
+            }
+            branch_of.resize(hexes.len(), b as u32);
         }
     }
     regions.resize(hexes.len(), Region::Lumen);
-    let lumen_per_interval = core_quads.len() + m * r_cells;
-    // first element index of each wall cell layer, by interval: computed while pushing
-    let mut wall_layer_start: Vec<usize> = vec![0; grid.wall_cells];
     for region in Region::WALL {
-        for i in 0..stations - 1 {
-            for (w, r) in levels.wall_regions.iter().enumerate() {
-                if *r != region {
-                    continue;
-                }
-                if i == 0 {
-                    wall_layer_start[w] = hexes.len();
-                }
-                for k in 0..m {
-                    hexes.push(grid.ring_hex(i, r_cells + w, k));
-                    regions.push(region);
+        for (b, pb) in projected.iter().enumerate() {
+            let last = pb.sections.len() - 2;
+            for i in 0..=last {
+                for (w, r) in levels.wall_regions.iter().enumerate() {
+                    if *r != region {
+                        continue;
+                    }
+                    for k in 0..m {
+                        let e = hexes.len();
+                        if w == 0 {
+                            add_face(sets::WALL_LUMEN_FACES.into(), e, FACE_INNER);
+                        }
+                        if w == w_cells - 1 {
+                            add_face(sets::WALL_OUTER_FACES.into(), e, FACE_OUTER);
+                        }
+                        for (cond, inlet, face) in [(i == 0, true, FACE_UPSTREAM), (i == last, false, FACE_DOWNSTREAM)] {
+                            if let (true, Some(name)) = (cond, end_name(b, inlet)) {
+                                add_face(sets::wall_end(name), e, face);
+                            }
+                        }
+                        hexes.push(ring_hex(b, i, r_cells + w, k));
+                        regions.push(region);
+                        branch_of.push(b as u32);
+                    }
                 }
             }
         }
     }
-    // Within a region, elements go interval by interval, each interval holding the region's
-    // cell layers in order; the index of (interval i, wall cell layer w, ring k):
-    let cells_in_region = |r: Region| levels.wall_regions.iter().filter(|x| **x == r).count();
-    let wall_elem = |i: usize, w: usize, k: usize| -> u32 {
-        let r = levels.wall_regions[w];
-        let first_w = levels.wall_regions.iter().position(|x| *x == r).unwrap();
-        (wall_layer_start[first_w] + (i * cells_in_region(r) + (w - first_w)) * m + k) as u32
-    };
-    let lumen_elem = |i: usize, level: usize, k: usize| -> u32 {
-        (i * lumen_per_interval + core_quads.len() + level * m + k) as u32
-    };
 
-    // Sets.
-    let last = stations - 1;
-    let ef = |element: u32, face: usize| ElementFace { element, face: face as u8 };
-    let mut node_sets: IndexMap<String, Vec<u32>> = IndexMap::new();
-    let mut face_sets: IndexMap<String, Vec<ElementFace>> = IndexMap::new();
-    let interface: Vec<u32> = (0..stations).flat_map(|i| (0..m).map(move |k| (i, k))).map(|(i, k)| grid.ring(i, r_cells, k)).collect();
-    let outer: Vec<u32> = (0..stations)
-        .flat_map(|i| (0..m).map(move |k| (i, k)))
-        .map(|(i, k)| grid.ring(i, r_cells + grid.wall_cells, k))
-        .collect();
-    node_sets.insert(sets::INTERFACE_NODES.into(), interface);
-    node_sets.insert(sets::OUTER_WALL_NODES.into(), outer);
-    face_sets.insert(
-        sets::LUMEN_WALL_FACES.into(),
-        (0..stations - 1).flat_map(|i| (0..m).map(move |k| (i, k))).map(|(i, k)| ef(lumen_elem(i, r_cells - 1, k), FACE_OUTER)).collect(),
+    // Node sets: the interface, the outer wall, and each end's lumen and wall nodes.
+    node_sets.insert(sets::INTERFACE_NODES.into(), surface_nodes.clone());
+    node_sets.insert(
+        sets::OUTER_WALL_NODES.into(),
+        surface_nodes.iter().map(|&s| wall_base[s as usize] + (w_cells - 1) as u32).collect(),
     );
-    face_sets.insert(
-        sets::WALL_LUMEN_FACES.into(),
-        (0..stations - 1).flat_map(|i| (0..m).map(move |k| (i, k))).map(|(i, k)| ef(wall_elem(i, 0, k), FACE_INNER)).collect(),
-    );
-    face_sets.insert(
-        sets::WALL_OUTER_FACES.into(),
-        (0..stations - 1)
-            .flat_map(|i| (0..m).map(move |k| (i, k)))
-            .map(|(i, k)| ef(wall_elem(i, grid.wall_cells - 1, k), FACE_OUTER))
-            .collect(),
-    );
-
     let mut ends = Vec::new();
-    for (name, is_inlet, i, interval, face) in
-        [("inlet", true, 0, 0, FACE_UPSTREAM), ("outlet", false, last, last - 1, FACE_DOWNSTREAM)]
-    {
-        let station = &projected.sections[i].station;
-        let base = (i * grid.per_station()) as u32;
-        let lumen_nodes: Vec<u32> = (base..base + (grid.core_count() + m * r_cells) as u32).collect();
-        let wall_nodes: Vec<u32> = (r_cells..=r_cells + grid.wall_cells).flat_map(|l| (0..m).map(move |k| (l, k))).map(|(l, k)| grid.ring(i, l, k)).collect();
-        node_sets.insert(sets::lumen_end(name), lumen_nodes);
-        node_sets.insert(sets::wall_end(name), sorted(wall_nodes));
-        let lumen_faces = (0..lumen_per_interval).map(|e| ef((interval * lumen_per_interval + e) as u32, face)).collect();
-        face_sets.insert(sets::lumen_end(name), lumen_faces);
-        let wall_faces = (0..grid.wall_cells).flat_map(|w| (0..m).map(move |k| (w, k))).map(|(w, k)| ef(wall_elem(interval, w, k), face)).collect();
-        face_sets.insert(sets::wall_end(name), sorted(wall_faces));
+    for (b, is_inlet, name) in &end_names {
+        let pb = &projected[*b];
+        let i = if *is_inlet { 0 } else { pb.sections.len() - 1 };
+        node_sets.insert(sets::lumen_end(name), branch_nodes[*b].stations[i].clone());
+        let wall: Vec<u32> =
+            (r_cells..=r_cells + w_cells).flat_map(|l| (0..m).map(move |k| (l, k))).map(|(l, k)| ring(*b, i, l, k)).collect();
+        node_sets.insert(sets::wall_end(name), wall);
+        let station = &pb.sections[i].station;
         let t = station.frame.tangent;
         ends.push(VesselEnd {
-            name: name.into(),
-            is_inlet,
-            branch: 0,
+            name: name.clone(),
+            is_inlet: *is_inlet,
+            branch: *b,
             centre: station.point,
-            outward_normal: if is_inlet { -t } else { t },
+            outward_normal: if *is_inlet { -t } else { t },
         });
     }
     for v in node_sets.values_mut() {
         v.sort_unstable();
+        v.dedup();
     }
     for v in face_sets.values_mut() {
         v.sort_unstable();
     }
 
-    let n_el = hexes.len();
     VesselMesh {
         nodes,
         hexes,
         regions,
-        branch_of: vec![0; n_el],
+        branch_of,
         triads: Vec::new(),
         fibres: Vec::new(),
         quality: Vec::new(),
@@ -260,59 +348,62 @@ pub fn build_volume(
         ends,
         node_sets,
         face_sets,
-        branch_names: vec!["branch_0".into()],
+        branch_names,
     }
-}
-
-fn sorted<T: Ord>(mut v: Vec<T>) -> Vec<T> {
-    v.sort_unstable();
-    v
 }
 
 /// Passes of neighbour averaging of the wall directions: enough to calm the voxel ripples of
 /// segmented surfaces, few enough to keep the shape.
 const NORMAL_SMOOTHING_PASSES: usize = 3;
 
-/// Outward unit normals of the meshed lumen surface at its nodes, per station and ring point:
-/// the average of the adjacent quads' normals, smoothed over the structured grid. At the end
-/// stations the axial component is removed so the wall's end rings stay in the end planes.
-fn surface_normals(projected: &ProjectedBranch) -> Vec<Vec<Vector3<f64>>> {
-    let secs = &projected.sections;
-    let (n, m) = (secs.len(), secs[0].surface.len());
-    let s = |i: usize, k: usize| secs[i].surface[k % m];
-    let mut normals = vec![vec![Vector3::zeros(); m]; n];
-    for i in 0..n - 1 {
-        for k in 0..m {
-            // circumferential x axial = outward (the ring runs counter-clockwise about the tangent)
-            let a = (s(i, k + 1) - s(i, k)) + (s(i + 1, k + 1) - s(i + 1, k));
-            let b = (s(i + 1, k) - s(i, k)) + (s(i + 1, k + 1) - s(i, k + 1));
-            let q = a.cross(&b);
-            for (ii, kk) in [(i, k), (i, k + 1), (i + 1, k), (i + 1, k + 1)] {
-                normals[ii][kk % m] += q;
-            }
+/// Outward unit normals of the meshed lumen surface at its nodes: the sum of the adjacent
+/// quads' normals, smoothed over the quad mesh (a node counts twice, each neighbour once; a node
+/// with fewer than four neighbours, on an end ring, counts itself in their place). At the
+/// vessel's end rings the axial component is removed so the wall's end rings stay in the end
+/// planes.
+fn surface_normals(
+    nodes: &[Point3<f64>],
+    quads: &[[u32; 4]],
+    rays: &[Vector3<f64>],
+    end_tangent: &HashMap<u32, Vector3<f64>>,
+) -> HashMap<u32, Vector3<f64>> {
+    let mut normal: BTreeMap<u32, Vector3<f64>> = BTreeMap::new();
+    let mut neighbours: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    for q in quads {
+        let p = q.map(|i| nodes[i as usize]);
+        // circumferential x axial = outward
+        let a = (p[1] - p[0]) + (p[2] - p[3]);
+        let b = (p[3] - p[0]) + (p[2] - p[1]);
+        let v = a.cross(&b);
+        for c in 0..4 {
+            *normal.entry(q[c]).or_insert_with(Vector3::zeros) += v;
+            let nb = neighbours.entry(q[c]).or_default();
+            nb.push(q[(c + 1) % 4]);
+            nb.push(q[(c + 3) % 4]);
         }
+    }
+    for nb in neighbours.values_mut() {
+        nb.sort_unstable();
+        nb.dedup();
     }
     let unit = |v: Vector3<f64>, fallback: Vector3<f64>| if v.norm() > 0.0 { v.normalize() } else { fallback };
-    for (i, row) in normals.iter_mut().enumerate() {
-        for (k, v) in row.iter_mut().enumerate() {
-            *v = unit(*v, secs[i].dirs[k]);
-        }
+    for (id, v) in normal.iter_mut() {
+        *v = unit(*v, rays[*id as usize]);
     }
     for _ in 0..NORMAL_SMOOTHING_PASSES {
-        let prev = normals.clone();
-        for i in 0..n {
-            for k in 0..m {
-                let mut sum = prev[i][k] * 2.0 + prev[i][(k + 1) % m] + prev[i][(k + m - 1) % m];
-                sum += prev[i.saturating_sub(1)][k] + prev[(i + 1).min(n - 1)][k];
-                normals[i][k] = unit(sum, prev[i][k]);
+        let prev = normal.clone();
+        for (id, v) in normal.iter_mut() {
+            let nb = &neighbours[id];
+            let mut sum = prev[id] * (2.0 + 4usize.saturating_sub(nb.len()) as f64);
+            for j in nb {
+                sum += prev[j];
             }
+            *v = unit(sum, prev[id]);
         }
     }
-    for i in [0, n - 1] {
-        let t = secs[i].station.frame.tangent;
-        for (v, d) in normals[i].iter_mut().zip(&secs[i].dirs) {
-            *v = unit(*v - t * v.dot(&t), *d);
-        }
+    for (id, t) in end_tangent {
+        let v = normal[id];
+        normal.insert(*id, unit(v - t * v.dot(t), rays[*id as usize]));
     }
-    normals
+    normal.into_iter().collect()
 }

@@ -1,0 +1,536 @@
+//! Block topology at a junction: the "book of pages" of BRANCHING.md §1, built from the lumen
+//! surface and the centerline tree, without manual input.
+//!
+//! A straight *spine* crosses the junction through its centre X along an axis `a` normal to the
+//! (best-fit) plane of the branch directions. The k branches, ordered counter-clockwise about
+//! `a`, are separated by k half-plane *pages* hanging on the spine; each page is shared by the
+//! two branches on either side of it. The O-grid of every branch is swept from its last ordinary
+//! cross-section to a *folded* end section: the half of its template left of the grid line
+//! x = 0 is laid on one page, the right half on the other, and x = 0 on the spine. A page's
+//! nodes are computed once and given to both branches, so the junction is conformal by
+//! construction, and every hex of the junction belongs to exactly one branch.
+//!
+//! Choices, defended in the README:
+//! * the axis maximises the smallest angular gap between the branch directions projected on the
+//!   plane normal to it (start: the best-fit plane's normal);
+//! * a page sits between its two branches at an angle split in proportion to their radii, so a
+//!   small side branch gets a narrow wedge and the large vessel keeps its cells;
+//! * the folded section is scaled by the distances from X to the wall along each page and along
+//!   the spine, so rays on a page stay inside it and are star-shaped from the spine;
+//! * each node of the transition follows a cubic Hermite curve from its place in the last
+//!   ordinary section (leaving along the centerline) to its place on the page (arriving across
+//!   the page), and the rays that find the lumen wall follow the same interpolation.
+
+use crate::blocks::SectionTemplate;
+use crate::centerline::{Branch, CenterlineSample, CenterlineTree, Frame};
+use crate::error::{Error, Result};
+use crate::surface::LumenSurface;
+use nalgebra::{Matrix3, Point3, Vector2, Vector3};
+use std::f64::consts::{PI, TAU};
+
+/// Branches whose projected directions are closer than this about the spine cannot share a
+/// junction (BRANCHING.md §4.1).
+const MIN_ANGULAR_GAP_DEG: f64 = 25.0;
+/// Largest number of branches (parent included) at one junction.
+const MAX_BRANCHES: usize = 5;
+
+/// One branch as seen from a junction.
+#[derive(Debug, Clone)]
+pub struct JunctionSlot {
+    pub branch: usize,
+    /// The branch that ends at the junction (the others start there).
+    pub is_parent: bool,
+    /// Unit direction from the centre into the branch, projected normal to the axis.
+    pub direction: Vector3<f64>,
+    /// Angle of `direction` about the axis from the reference direction, radians in [0, 2 pi).
+    pub angle: f64,
+    /// Branch radius near the junction, mm.
+    pub radius: f64,
+}
+
+/// A half-plane hanging on the spine.
+#[derive(Debug, Clone)]
+pub struct Page {
+    /// Unit direction in the page, normal to the spine.
+    pub dir: Vector3<f64>,
+    pub angle: f64,
+    /// Distance from the centre to the lumen wall along `dir`, mm (the page's length scale).
+    pub depth: f64,
+}
+
+/// The geometry of one junction.
+#[derive(Debug, Clone)]
+pub struct JunctionGeometry {
+    pub index: usize,
+    pub centre: Point3<f64>,
+    pub radius: f64,
+    /// Spine axis (unit).
+    pub axis: Vector3<f64>,
+    /// Angle origin about the axis (unit, normal to it): the parent's direction.
+    pub reference: Vector3<f64>,
+    /// Branches counter-clockwise about the axis.
+    pub slots: Vec<JunctionSlot>,
+    /// Page i lies between slot i and slot i + 1 (cyclically).
+    pub pages: Vec<Page>,
+    /// Distances from the centre to the wall along +axis and -axis, mm.
+    pub spine_up: f64,
+    pub spine_down: f64,
+}
+
+fn describe_point(p: &Point3<f64>) -> String {
+    format!("({:.3}, {:.3}, {:.3}) mm", p.x, p.y, p.z)
+}
+
+impl JunctionGeometry {
+    /// Where the junction is, for messages.
+    pub fn describe(&self, tree: &CenterlineTree) -> String {
+        let names: Vec<&str> = self.slots.iter().map(|s| tree.branches[s.branch].name.as_str()).collect();
+        format!("the junction at {} (branches {})", describe_point(&self.centre), names.join(", "))
+    }
+
+    pub fn slot_of(&self, branch: usize) -> usize {
+        self.slots.iter().position(|s| s.branch == branch).expect("branch belongs to the junction")
+    }
+
+    /// Pages on the +x and -x sides of a slot's template. The template's x axis is the frame
+    /// normal = binormal x tangent = axis x tangent at the fold; a daughter's tangent leaves the
+    /// centre, so +x is the counter-clockwise page; the parent's arrives, so +x is clockwise.
+    pub fn side_pages(&self, slot: usize) -> (usize, usize) {
+        let k = self.slots.len();
+        let ccw = slot;
+        let cw = (slot + k - 1) % k;
+        if self.slots[slot].is_parent {
+            (cw, ccw)
+        } else {
+            (ccw, cw)
+        }
+    }
+
+    /// Unit bisector of a slot's wedge (between its two pages), pointing into the slot.
+    pub fn wedge_bisector(&self, slot: usize) -> Vector3<f64> {
+        let k = self.slots.len();
+        let (lo, hi) = (self.pages[(slot + k - 1) % k].angle, self.pages[slot].angle);
+        let width = (hi - lo).rem_euclid(TAU);
+        self.direction_at(lo + 0.5 * width)
+    }
+
+    fn direction_at(&self, angle: f64) -> Vector3<f64> {
+        let side = self.axis.cross(&self.reference);
+        self.reference * angle.cos() + side * angle.sin()
+    }
+
+    /// The folded end section of a slot: a template point (x, y), in radius units and already
+    /// turned by the branch's quarter turns, on its page. x = 0 is the spine.
+    pub fn fold(&self, slot: usize, p: &Vector2<f64>) -> Point3<f64> {
+        let (right, left) = self.side_pages(slot);
+        let page = &self.pages[if p.x >= 0.0 { right } else { left }];
+        let along = if p.y >= 0.0 { self.spine_up } else { self.spine_down };
+        self.centre + self.axis * (p.y * along) + page.dir * (p.x.abs() * page.depth)
+    }
+
+    /// Unit normal of a page, pointing to the side of the given slot.
+    fn page_normal_towards(&self, page: usize, slot: usize) -> Vector3<f64> {
+        let n = self.axis.cross(&self.pages[page].dir);
+        if n.dot(&self.wedge_bisector(slot)) >= 0.0 {
+            n
+        } else {
+            -n
+        }
+    }
+
+    /// Direction in which the transition curve of a template point arrives at the fold, seen
+    /// from the slot's side: along the wedge bisector at the spine, turning towards the page's
+    /// normal away from it so that hexes meet the page at a good angle.
+    pub fn arrival(&self, slot: usize, p: &Vector2<f64>, core_size: f64) -> Vector3<f64> {
+        let (right, left) = self.side_pages(slot);
+        let page = if p.x >= 0.0 { right } else { left };
+        let w = -self.wedge_bisector(slot);
+        let n = -self.page_normal_towards(page, slot);
+        let beta = 0.5 * (p.x.abs() / core_size).min(1.0);
+        (w * (1.0 - beta) + n * beta).normalize()
+    }
+}
+
+/// Signed angle from `from` to `to` about the unit `axis` (both normal to it), radians.
+pub fn signed_angle(from: &Vector3<f64>, to: &Vector3<f64>, axis: &Vector3<f64>) -> f64 {
+    from.cross(to).dot(axis).atan2(from.dot(to))
+}
+
+/// Distance from a point along a direction to the lumen wall, or an error naming the junction.
+fn wall_distance(
+    surface: &LumenSurface,
+    from: &Point3<f64>,
+    dir: &Vector3<f64>,
+    reach: f64,
+    what: &dyn Fn() -> String,
+) -> Result<f64> {
+    surface.first_hit(from, dir, reach).map(|h| h.distance).ok_or_else(|| {
+        Error::Geometry(format!(
+            "{}: {}: a ray from the junction centre along ({:.3}, {:.3}, {:.3}) does not meet the lumen wall \
+             within {:.2} mm; the junction centre may lie outside the lumen (check the centerlines)",
+            surface.source.display(),
+            what(),
+            dir.x,
+            dir.y,
+            dir.z,
+            reach
+        ))
+    })
+}
+
+/// The smallest angular gap between consecutive sorted angles (cyclic).
+fn min_gap(angles: &mut [f64]) -> f64 {
+    angles.sort_by(f64::total_cmp);
+    let k = angles.len();
+    (0..k).map(|i| (angles[(i + 1) % k] - angles[i]).rem_euclid(TAU)).fold(TAU, f64::min)
+}
+
+/// Branch direction leaving a junction: from the centre to the branch's centerline point at
+/// `r_centre + r_branch` along it (where the branch leaves the junction's inscribed sphere).
+fn leaving_direction(branch: &Branch, from_end: bool, reach: f64) -> (Vector3<f64>, f64) {
+    let len = branch.length();
+    let s = if from_end { (len - reach).max(0.0) } else { reach.min(len) };
+    let q = branch.at(s);
+    let c = if from_end { branch.samples.last().unwrap().point } else { branch.samples[0].point };
+    ((q.point - c).normalize(), q.radius)
+}
+
+/// Analyses every junction of the tree.
+pub fn analyse_junctions(tree: &CenterlineTree, surface: &LumenSurface) -> Result<Vec<JunctionGeometry>> {
+    tree.junctions.iter().enumerate().map(|(j, _)| analyse_junction(tree, j, surface)).collect()
+}
+
+fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface) -> Result<JunctionGeometry> {
+    let junction = &tree.junctions[index];
+    let x = junction.centre;
+    let r_x = junction.radius;
+    let mut members: Vec<(usize, bool)> = vec![(junction.parent, true)];
+    members.extend(junction.daughters.iter().map(|&d| (d, false)));
+    let where_ = || format!("the junction at {}", describe_point(&x));
+    if members.len() > MAX_BRANCHES {
+        return Err(Error::Geometry(format!(
+            "{}: {} has {} branches; at most {MAX_BRANCHES} can share one junction. Split the centerlines so \
+             that branches leave at least one radius apart",
+            surface.source.display(),
+            where_(),
+            members.len()
+        )));
+    }
+    let dirs: Vec<(Vector3<f64>, f64)> = members
+        .iter()
+        .map(|&(b, parent)| {
+            let br = &tree.branches[b];
+            let reach = r_x + br.at(if parent { br.length() } else { 0.0 }).radius;
+            leaving_direction(br, parent, reach)
+        })
+        .collect();
+
+    // Axis: candidates are the best-fit plane's normal and the normals of the planes of pairs
+    // of branch directions; keep the one that separates the projected directions best.
+    let mut scatter = Matrix3::zeros();
+    for (d, _) in &dirs {
+        scatter += d * d.transpose();
+    }
+    let eig = scatter.symmetric_eigen();
+    let imin = eig.eigenvalues.imin();
+    let mut candidates = vec![eig.eigenvectors.column(imin).into_owned()];
+    for i in 0..dirs.len() {
+        for j in i + 1..dirs.len() {
+            let c = dirs[i].0.cross(&dirs[j].0);
+            if c.norm() > 1e-6 {
+                candidates.push(c.normalize());
+            }
+        }
+    }
+    let gap_of = |a: &Vector3<f64>| -> f64 {
+        let reference = dirs[0].0 - a * dirs[0].0.dot(a);
+        if reference.norm() < 1e-9 {
+            return 0.0;
+        }
+        let reference = reference.normalize();
+        let mut angles: Vec<f64> = dirs
+            .iter()
+            .map(|(d, _)| {
+                let p = d - a * d.dot(a);
+                if p.norm() < 0.2 {
+                    return f64::NAN;
+                }
+                signed_angle(&reference, &p.normalize(), a).rem_euclid(TAU)
+            })
+            .collect();
+        if angles.iter().any(|v| v.is_nan()) {
+            return 0.0;
+        }
+        min_gap(&mut angles)
+    };
+    let mut best = (candidates[0], gap_of(&candidates[0]));
+    for c in &candidates[1..] {
+        let g = gap_of(c);
+        if g > best.1 + 1e-9 {
+            best = (*c, g);
+        }
+    }
+    let (mut axis, gap) = best;
+    // A deterministic sign: the largest component positive.
+    let imax = axis.iamax();
+    if axis[imax] < 0.0 {
+        axis = -axis;
+    }
+    if gap.to_degrees() < MIN_ANGULAR_GAP_DEG {
+        return Err(Error::Geometry(format!(
+            "{}: {}: the branches cannot be ordered around a common axis (the best axis leaves only {:.1} degrees \
+             between two branches, at least {MIN_ANGULAR_GAP_DEG} are needed): the junction is strongly non-planar. \
+             Check the centerlines there, or smooth them (centerline.smoothing_passes)",
+            surface.source.display(),
+            where_(),
+            gap.to_degrees()
+        )));
+    }
+    let reference = (dirs[0].0 - axis * dirs[0].0.dot(&axis)).normalize();
+    let mut slots: Vec<JunctionSlot> = members
+        .iter()
+        .zip(&dirs)
+        .map(|(&(branch, is_parent), (d, r))| {
+            let p = (d - axis * d.dot(&axis)).normalize();
+            JunctionSlot {
+                branch,
+                is_parent,
+                direction: p,
+                angle: signed_angle(&reference, &p, &axis).rem_euclid(TAU),
+                radius: *r,
+            }
+        })
+        .collect();
+    slots.sort_by(|a, b| a.angle.total_cmp(&b.angle));
+
+    let k = slots.len();
+    let mut geometry = JunctionGeometry {
+        index,
+        centre: x,
+        radius: r_x,
+        axis,
+        reference,
+        slots,
+        pages: vec![],
+        spine_up: 0.0,
+        spine_down: 0.0,
+    };
+    let reach = 20.0 * r_x;
+    for i in 0..k {
+        let (a, b) = (&geometry.slots[i], &geometry.slots[(i + 1) % k]);
+        let width = (b.angle - a.angle).rem_euclid(TAU);
+        let width = if width == 0.0 { TAU } else { width };
+        let angle = a.angle + width * a.radius / (a.radius + b.radius);
+        let dir = geometry.direction_at(angle);
+        let depth = wall_distance(surface, &x, &dir, reach, &where_)?;
+        geometry.pages.push(Page { dir, angle: angle.rem_euclid(TAU), depth });
+    }
+    geometry.spine_up = wall_distance(surface, &x, &axis, reach, &where_)?;
+    geometry.spine_down = wall_distance(surface, &x, &(-axis), reach, &where_)?;
+    Ok(geometry)
+}
+
+/// Quarter turns of the template as index maps on the core grid: turning by 90 degrees
+/// counter-clockwise sends (x, y) to (-y, x).
+pub fn turn_core_index(n: usize, q: u8, i: usize, j: usize) -> (usize, usize) {
+    let (mut i, mut j) = (i, j);
+    for _ in 0..q % 4 {
+        (i, j) = (n - j, i);
+    }
+    (i, j)
+}
+
+/// A template point turned by q quarter turns.
+pub fn turn(q: u8, p: &Vector2<f64>) -> Vector2<f64> {
+    let mut p = *p;
+    for _ in 0..q % 4 {
+        p = Vector2::new(-p.y, p.x);
+    }
+    p
+}
+
+/// How a branch end meets a junction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FoldEnd {
+    pub junction: usize,
+    pub slot: usize,
+    /// Quarter turns from the branch's template to the fold's.
+    pub quarter_turns: u8,
+}
+
+/// The frame normal a branch must have at a junction's transition station for its template,
+/// turned by q quarter turns, to lie on the fold: x -> axis x tangent, y -> axis.
+pub fn fold_normal(axis: &Vector3<f64>, tangent: &Vector3<f64>, q: u8) -> Vector3<f64> {
+    let a = (axis - tangent * axis.dot(tangent)).normalize();
+    let x = a.cross(tangent);
+    // Turning the template by q quarter turns counter-clockwise turns the normal the other way.
+    let angle = -(q as f64) * 0.5 * PI;
+    x * angle.cos() - a * angle.sin()
+}
+
+/// Rotates every frame of a branch about its tangent by an angle that varies linearly in arc
+/// length, from `start` at s0 to `end` at s1 (constant outside).
+pub fn twist_frames(branch: &mut Branch, s0: f64, start: f64, s1: f64, end: f64) {
+    for sample in &mut branch.samples {
+        let w = if s1 > s0 { ((sample.s - s0) / (s1 - s0)).clamp(0.0, 1.0) } else { 0.0 };
+        let phi = start + (end - start) * w;
+        let f = sample.frame;
+        let n = f.normal * phi.cos() + f.binormal * phi.sin();
+        sample.frame = Frame::from_tangent_and_hint(f.tangent, n);
+    }
+}
+
+/// Where the ordinary sections of a branch stop at a junction: far enough from the centre that
+/// the section clears the neighbouring branches (a disc of radius r at distance L along a
+/// branch at angle phi from its neighbour clears it when L > r (1 + cos phi) / sin phi), and at
+/// least 1.5 junction radii away.
+pub fn transition_length(geometry: &JunctionGeometry, slot: usize) -> f64 {
+    let k = geometry.slots.len();
+    let me = &geometry.slots[slot];
+    let mut length: f64 = 1.5 * geometry.radius;
+    for other in [(slot + 1) % k, (slot + k - 1) % k] {
+        let o = &geometry.slots[other];
+        let phi = (o.angle - me.angle).rem_euclid(TAU);
+        let phi = phi.min(TAU - phi).clamp(0.2, PI);
+        let clear = if phi < 0.5 * PI { me.radius.max(o.radius) * (1.0 + phi.cos()) / phi.sin() } else { 0.0 };
+        length = length.max(clear + 0.5 * me.radius);
+    }
+    length
+}
+
+/// Cubic Hermite interpolation between p0 (tangent t0) and p1 (tangent t1) at u in [0, 1].
+pub fn hermite(p0: &Point3<f64>, t0: &Vector3<f64>, p1: &Point3<f64>, t1: &Vector3<f64>, u: f64) -> Point3<f64> {
+    let (u2, u3) = (u * u, u * u * u);
+    let h00 = 2.0 * u3 - 3.0 * u2 + 1.0;
+    let h10 = u3 - 2.0 * u2 + u;
+    let h01 = -2.0 * u3 + 3.0 * u2;
+    let h11 = u3 - u2;
+    Point3::from(p0.coords * h00 + t0 * h10 + p1.coords * h01 + t1 * h11)
+}
+
+/// The template points of one transition section: core nodes and ray targets, in order.
+pub struct TransitionPoints {
+    pub core: Vec<Point3<f64>>,
+    pub targets: Vec<Point3<f64>>,
+    pub centre: Point3<f64>,
+}
+
+/// Positions of the core nodes and ray targets along a transition, from the ordinary section
+/// at `station` (u = 0) to the fold (u = 1), at the given parameters.
+pub fn transition_points(
+    geometry: &JunctionGeometry,
+    fold: &FoldEnd,
+    template: &SectionTemplate,
+    station: &CenterlineSample,
+    towards_junction: &Vector3<f64>,
+    params: &[f64],
+) -> Vec<TransitionPoints> {
+    let curve = |xy: &Vector2<f64>| {
+        let p0 = template.place(station, xy);
+        let turned = turn(fold.quarter_turns, xy);
+        let p1 = geometry.fold(fold.slot, &turned);
+        let chord = (p1 - p0).norm();
+        let t0 = towards_junction * chord;
+        let t1 = geometry.arrival(fold.slot, &turned, template.core_size) * chord;
+        (p0, t0, p1, t1)
+    };
+    let core_curves: Vec<_> = template.core.iter().map(curve).collect();
+    let target_curves: Vec<_> =
+        template.target_dir.iter().map(|d| curve(&(d * template.ray_reach))).collect();
+    let centre_curve = curve(&Vector2::zeros());
+    params
+        .iter()
+        .map(|&u| {
+            let eval = |c: &(Point3<f64>, Vector3<f64>, Point3<f64>, Vector3<f64>)| hermite(&c.0, &c.1, &c.2, &c.3, u);
+            TransitionPoints {
+                core: core_curves.iter().map(eval).collect(),
+                targets: target_curves.iter().map(eval).collect(),
+                centre: eval(&centre_curve),
+            }
+        })
+        .collect()
+}
+
+/// Key of a node of a folded end section, the same for the two branches sharing a page.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct FoldKey {
+    pub junction: u32,
+    /// Page index, or u32::MAX on the spine.
+    pub page: u32,
+    /// Core grid columns from the spine.
+    pub from_spine: u32,
+    /// Core grid row (along the axis).
+    pub row: u32,
+    /// 0: the core node; 1..: ring levels (lumen, then wall) of the ray that starts there.
+    pub level: u32,
+}
+
+impl FoldKey {
+    pub const SPINE: u32 = u32::MAX;
+
+    /// The key of core grid node (i, j) of a slot's template (before turning) at ring level.
+    pub fn new(geometry: &JunctionGeometry, fold: &FoldEnd, n: usize, i: usize, j: usize, level: usize) -> FoldKey {
+        let (ti, tj) = turn_core_index(n, fold.quarter_turns, i, j);
+        let half = n / 2;
+        let (right, left) = geometry.side_pages(fold.slot);
+        let page = match ti.cmp(&half) {
+            std::cmp::Ordering::Equal => FoldKey::SPINE,
+            std::cmp::Ordering::Greater => right as u32,
+            std::cmp::Ordering::Less => left as u32,
+        };
+        FoldKey {
+            junction: geometry.index as u32,
+            page,
+            from_spine: ti.abs_diff(half) as u32,
+            row: tj as u32,
+            level: level as u32,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quarter_turns_of_indices_match_turns_of_points() {
+        let t = SectionTemplate::new(4, 0.5, 2.0);
+        for q in 0..4u8 {
+            for j in 0..=4 {
+                for i in 0..=4 {
+                    let (ti, tj) = turn_core_index(4, q, i, j);
+                    let p = turn(q, &t.core[j * 5 + i]);
+                    assert!((t.core[tj * 5 + ti] - p).norm() < 1e-12);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn fold_normal_puts_the_template_on_the_pages() {
+        let axis = Vector3::z();
+        let tangent = Vector3::x();
+        for q in 0..4u8 {
+            let n = fold_normal(&axis, &tangent, q);
+            let b = tangent.cross(&n);
+            // template point (1, 0) placed with this frame equals the turned point on the fold axes
+            let p = turn(q, &Vector2::new(1.0, 0.0));
+            let expect = axis.cross(&tangent) * p.x + axis * p.y;
+            assert!((n - expect).norm() < 1e-12, "q {q}");
+            let p = turn(q, &Vector2::new(0.0, 1.0));
+            let expect = axis.cross(&tangent) * p.x + axis * p.y;
+            assert!((b - expect).norm() < 1e-12, "q {q}");
+        }
+    }
+
+    #[test]
+    fn hermite_interpolates_ends_and_tangents() {
+        let (p0, p1) = (Point3::origin(), Point3::new(1.0, 0.0, 0.0));
+        let (t0, t1) = (Vector3::new(0.0, 1.0, 0.0), Vector3::new(1.0, 0.0, 0.0));
+        assert_eq!(hermite(&p0, &t0, &p1, &t1, 0.0), p0);
+        assert!((hermite(&p0, &t0, &p1, &t1, 1.0) - p1).norm() < 1e-15);
+        let h = 1e-6;
+        let d0 = (hermite(&p0, &t0, &p1, &t1, h) - p0) / h;
+        assert!((d0 - t0).norm() < 1e-5);
+    }
+}
