@@ -36,6 +36,8 @@ pub struct ProjectedSection {
     pub dirs: Vec<Vector3<f64>>,
     /// Lumen-surface nodes: where each ray meets the surface.
     pub surface: Vec<Point3<f64>>,
+    /// A section of a junction's transition (its inner nodes may be moved to raise quality).
+    pub in_junction: bool,
 }
 
 /// What lies at one end of a meshed branch.
@@ -118,6 +120,7 @@ fn cast_rays(
         dirs: Vec::with_capacity(m),
         surface: Vec::with_capacity(m),
         core,
+        in_junction: false,
     };
     for (k, target) in targets.iter().enumerate() {
         let origin = section.core[template.ring_core_index[k]];
@@ -457,7 +460,7 @@ fn transition(
         let targets: Vec<Point3<f64>> = guides
             .iter()
             .enumerate()
-            .map(|(k, c)| {
+            .map(|(k, _)| {
                 let guide = guide_at[k];
                 let origin = p.core[template.ring_core_index[k]];
                 // A guide inside the lumen (a bulb) must not stop the ray short of the wall.
@@ -476,7 +479,7 @@ fn transition(
             }
             return Err(failure(*u, &probe));
         }
-        out.push(section);
+        out.push(ProjectedSection { in_junction: true, ..section });
     }
     out.push(fold);
     Ok(out)

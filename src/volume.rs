@@ -10,7 +10,7 @@ use crate::blocks::SectionTemplate;
 use crate::config::WallGrowth;
 use crate::junction::{FoldKey, JunctionGeometry};
 use crate::mesh::{
-    sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, WallLayer, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER,
+    sets, ElementFace, Hex, Region, HEX_EDGES, VesselEnd, VesselMesh, WallLayer, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER,
     FACE_UPSTREAM,
 };
 use crate::projection::{BranchEnd, ProjectedBranch};
@@ -90,6 +90,8 @@ pub fn build_volume(
     // Per node: the section radius and ray direction it was placed with (surface nodes only).
     let mut node_radius: Vec<f64> = Vec::new();
     let mut node_ray: Vec<Vector3<f64>> = Vec::new();
+    // Inner lumen nodes of junction transitions, which the optimisation may move.
+    let mut movable: Vec<bool> = Vec::new();
     let mut branch_nodes: Vec<BranchNodes> = Vec::with_capacity(projected.len());
     for pb in projected {
         let last = pb.sections.len() - 1;
@@ -101,7 +103,8 @@ pub fn build_volume(
                 _ => None,
             };
             let mut ids = Vec::with_capacity(core_count + r_cells * m);
-            let mut add = |key: Option<FoldKey>, p: Point3<f64>, radius: f64, ray: Vector3<f64>| -> u32 {
+            let inner_movable = sec.in_junction && fold.is_none();
+            let mut add = |key: Option<FoldKey>, p: Point3<f64>, radius: f64, ray: Vector3<f64>, free: bool| -> u32 {
                 if let Some(key) = key {
                     if let Some(&id) = pool.get(&key) {
                         return id;
@@ -111,6 +114,7 @@ pub fn build_volume(
                 nodes.push(p);
                 node_radius.push(radius);
                 node_ray.push(ray);
+                movable.push(free);
                 if let Some(key) = key {
                     pool.insert(key, id);
                 }
@@ -120,14 +124,15 @@ pub fn build_volume(
                 fold.map(|f| FoldKey::new(&junctions[f.junction], &f, n, c % (n + 1), c / (n + 1), level))
             };
             for (c, p) in sec.core.iter().enumerate() {
-                ids.push(add(key(c, 0), *p, sec.station.radius, Vector3::zeros()));
+                ids.push(add(key(c, 0), *p, sec.station.radius, Vector3::zeros(), inner_movable));
             }
             for (level, &rho) in levels.lumen.iter().enumerate().skip(1) {
                 for k in 0..m {
                     let (a, b) = (sec.origins[k], sec.surface[k]);
                     // The surface level is the hit point itself, bit for bit.
                     let p = if rho == 1.0 { b } else { a + (b - a) * rho };
-                    ids.push(add(key(template.ring_core_index[k], level), p, sec.station.radius, sec.dirs[k]));
+                    let free = inner_movable && level < r_cells;
+                    ids.push(add(key(template.ring_core_index[k], level), p, sec.station.radius, sec.dirs[k], free));
                 }
             }
             stations.push(ids);
@@ -281,6 +286,7 @@ pub fn build_volume(
         }
     }
     regions.resize(hexes.len(), Region::Lumen);
+    improve_junction_nodes(&mut nodes, &hexes, &movable);
     for region in Region::WALL {
         for (b, pb) in projected.iter().enumerate() {
             let last = pb.sections.len() - 2;
@@ -356,6 +362,65 @@ pub fn build_volume(
         node_sets,
         face_sets,
         branch_names,
+    }
+}
+
+/// Sweeps of the junction node optimisation.
+const OPTIMISATION_SWEEPS: usize = 10;
+
+/// Raises the worst scaled Jacobian around the inner lumen nodes of junction transitions
+/// (BRANCHING.md §4.4): each node in turn moves towards the centroid of its edge neighbours,
+/// by the largest of a few step fractions that improves the worst element around it. Surface
+/// and page nodes never move, so the mesh stays on the surface and conformal. Sequential, so
+/// the result does not depend on the thread count. Runs before the wall exists: only lumen
+/// elements can hold a movable node.
+fn improve_junction_nodes(nodes: &mut [Point3<f64>], lumen: &[Hex], movable: &[bool]) {
+    let free: Vec<u32> = (0..movable.len() as u32).filter(|&i| movable[i as usize]).collect();
+    if free.is_empty() {
+        return;
+    }
+    let mut incident: HashMap<u32, Vec<usize>> = HashMap::new();
+    let mut neighbours: HashMap<u32, Vec<u32>> = HashMap::new();
+    for (e, h) in lumen.iter().enumerate() {
+        for (c, &n) in h.iter().enumerate() {
+            if movable[n as usize] {
+                incident.entry(n).or_default().push(e);
+                let nb = neighbours.entry(n).or_default();
+                for &[a, b] in HEX_EDGES.iter() {
+                    if a == c {
+                        nb.push(h[b]);
+                    } else if b == c {
+                        nb.push(h[a]);
+                    }
+                }
+            }
+        }
+    }
+    for nb in neighbours.values_mut() {
+        nb.sort_unstable();
+        nb.dedup();
+    }
+    let worst = |nodes: &[Point3<f64>], elements: &[usize]| -> f64 {
+        elements
+            .iter()
+            .map(|&e| crate::quality::scaled_jacobian(&lumen[e].map(|n| nodes[n as usize])))
+            .fold(f64::INFINITY, f64::min)
+    };
+    for _ in 0..OPTIMISATION_SWEEPS {
+        for &n in &free {
+            let elements = &incident[&n];
+            let nb = &neighbours[&n];
+            let centroid = nb.iter().fold(Vector3::zeros(), |acc, &j| acc + nodes[j as usize].coords) / nb.len() as f64;
+            let old = nodes[n as usize];
+            let before = worst(nodes, elements);
+            for step in [1.0, 0.5, 0.25] {
+                nodes[n as usize] = old + (Point3::from(centroid) - old) * step;
+                if worst(nodes, elements) > before + 1e-9 {
+                    break;
+                }
+                nodes[n as usize] = old;
+            }
+        }
     }
 }
 
