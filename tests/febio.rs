@@ -108,8 +108,10 @@ fn ints(text: &str) -> Result<Vec<u32>, String> {
 }
 
 fn vec3(text: &str) -> Result<Vector3<f64>, String> {
-    let v: Vec<f64> =
-        text.split(',').map(|s| s.trim().parse::<f64>().map_err(|_| format!("not a vector: '{text}'"))).collect::<Result<_, _>>()?;
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f64>().map_err(|_| format!("not a vector: '{text}'")))
+        .collect::<Result<_, _>>()?;
     if v.len() != 3 {
         return Err(format!("not a 3-vector: '{text}'"));
     }
@@ -122,7 +124,8 @@ fn vec3(text: &str) -> Result<Vector3<f64>, String> {
 
 /// FEBio's own hex8 face table (FEElement::GetFace, FORMATS.md 2b), written out independently of
 /// vesselhex's.
-const FEBIO_HEX8_FACES: [[usize; 4]; 6] = [[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7], [0, 3, 2, 1], [4, 5, 6, 7]];
+const FEBIO_HEX8_FACES: [[usize; 4]; 6] =
+    [[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7], [0, 3, 2, 1], [4, 5, 6, 7]];
 /// For each corner, three neighbours forming a right-handed frame in a valid hex8.
 const CORNER_FRAMES: [[usize; 3]; 8] =
     [[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7], [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]];
@@ -245,7 +248,10 @@ impl Deck {
         self.root.one("Mesh").map(|m| m.all(kind).collect()).unwrap_or_default()
     }
     fn node_set(&self, name: &str) -> Option<Vec<u32>> {
-        self.mesh_children("NodeSet").into_iter().find(|s| s.attr("name") == Some(name)).and_then(|s| ints(&s.text).ok())
+        self.mesh_children("NodeSet")
+            .into_iter()
+            .find(|s| s.attr("name") == Some(name))
+            .and_then(|s| ints(&s.text).ok())
     }
     fn surface(&self, name: &str) -> Option<&El> {
         self.mesh_children("Surface").into_iter().find(|s| s.attr("name") == Some(name))
@@ -550,7 +556,8 @@ fn fsi_text() -> &'static str {
 /// The verified example decks, found above the crate (shared/docs/examples) or in
 /// $VESSELHEX_DOCS/examples.
 fn example(name: &str) -> Option<String> {
-    let mut candidates: Vec<PathBuf> = std::env::var_os("VESSELHEX_DOCS").map(|d| vec![PathBuf::from(d)]).unwrap_or_default();
+    let mut candidates: Vec<PathBuf> =
+        std::env::var_os("VESSELHEX_DOCS").map(|d| vec![PathBuf::from(d)]).unwrap_or_default();
     candidates.extend(common::crate_dir().ancestors().map(|a| a.join("shared/docs")));
     for dir in candidates {
         let p = dir.join("examples").join(name);
@@ -662,7 +669,8 @@ fn broken_decks_fail_the_checks() {
     let e = check_all(&dropped, "solid").unwrap_err();
     assert!(e.contains("lid 7") && e.contains("0 mat_axis entries"), "{e}");
     // MeshData before MeshDomains
-    let (md0, md1) = (text.find("  <MeshData>").unwrap(), text.find("  </MeshData>\n").unwrap() + "  </MeshData>\n".len());
+    let (md0, md1) =
+        (text.find("  <MeshData>").unwrap(), text.find("  </MeshData>\n").unwrap() + "  </MeshData>\n".len());
     let doms = text.find("  <MeshDomains>").unwrap();
     let swapped = format!("{}{}{}{}", &text[..doms], &text[md0..md1], &text[doms..md0], &text[md1..]);
     assert!(check_all(&swapped, "solid").unwrap_err().contains("out of order"));
@@ -674,7 +682,11 @@ fn broken_decks_fail_the_checks() {
     let repeated = format!("{}{}{}", &text[..second], first_id, &text[second_end..]);
     assert!(Deck::read(&repeated).unwrap_err().contains("increase strictly"));
     let set = text.find("<NodeSet name=\"wall_inlet\">").unwrap();
-    let children = format!("{}<NodeSet name=\"wall_inlet\"><n id=\"1\"/></NodeSet>\n{}", &text[..set], &text[set..].split_once('\n').unwrap().1);
+    let children = format!(
+        "{}<NodeSet name=\"wall_inlet\"><n id=\"1\"/></NodeSet>\n{}",
+        &text[..set],
+        &text[set..].split_once('\n').unwrap().1
+    );
     assert!(check_all(&children, "solid").unwrap_err().contains("not a leaf"));
     let unresolved = text.replace("mat=\"media\"", "mat=\"Media\"");
     assert!(check_all(&unresolved, "solid").unwrap_err().contains("unknown material"));
@@ -726,7 +738,8 @@ fn end_rings_are_held_axially_and_rigid_modes_removed() {
         assert!(set.iter().any(|i| d.point(*i)[j] > 0.1) && set.iter().any(|i| d.point(*i)[j] < -0.1));
     }
     // pressure ramps to 100 mmHg = 0.0133322 MPa
-    let p: f64 = d.root.one("Loads").unwrap().one("surface_load").unwrap().one("pressure").unwrap().text.parse().unwrap();
+    let p: f64 =
+        d.root.one("Loads").unwrap().one("surface_load").unwrap().one("pressure").unwrap().text.parse().unwrap();
     assert!((p - 0.0133322387415).abs() < 1e-12);
 }
 
@@ -834,7 +847,9 @@ fn structure(d: &Deck) -> Vec<(String, Vec<String>)> {
 
 #[test]
 fn decks_have_the_structure_of_the_verified_examples() {
-    for (ours, name, module) in [(wall_text(), "febio_wall_tube.feb", "solid"), (fsi_text(), "febio_fsi_tube.feb", "fluid-FSI")] {
+    for (ours, name, module) in
+        [(wall_text(), "febio_wall_tube.feb", "solid"), (fsi_text(), "febio_fsi_tube.feb", "fluid-FSI")]
+    {
         let Some(example) = example(name) else { return };
         // the checks accept the decks FEBio ran (so they test FEBio's rules, not our habits)
         // (their axes carry 8 significant digits, ours full precision)
@@ -902,10 +917,12 @@ fn metres_give_kilograms_and_pascals() {
         let q = mesh.nodes[*id as usize - 1];
         assert!((p.coords - q.coords * 1e-3).norm() <= 1e-15 * q.coords.norm().max(1.0), "{id}");
     }
-    let p: f64 = d.root.one("Loads").unwrap().one("surface_load").unwrap().one("pressure").unwrap().text.parse().unwrap();
+    let p: f64 =
+        d.root.one("Loads").unwrap().one("surface_load").unwrap().one("pressure").unwrap().text.parse().unwrap();
     assert!((p - 13332.2387415).abs() < 1e-6);
     let media = d.root.one("Material").unwrap().all("material").find(|m| m.attr("name") == Some("media")).unwrap();
-    assert!((media.one("c").unwrap().text.parse::<f64>().unwrap() - 3000.0).abs() < 1e-9);
+    // the shared default: HGO 2000 media with c x10 = 30 kPa
+    assert!((media.one("c").unwrap().text.parse::<f64>().unwrap() - 30e3).abs() < 1e-9);
     assert_eq!(media.one("gamma").unwrap().text, "29");
     let fsi = fsi_deck(mesh, &options(LengthUnit::M)).unwrap();
     let f = check_all(&fsi, "fluid-FSI").unwrap();
