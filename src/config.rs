@@ -292,6 +292,9 @@ pub struct MeshConfig {
     /// Abaqus and CalculiX decks (`[fe]`).
     #[serde(default)]
     pub fe: crate::writers::inp::FeConfig,
+    /// Per-layer wall constants of every FE deck (`[material]`).
+    #[serde(default)]
+    pub material: crate::writers::material::WallMaterial,
 }
 
 impl Default for MeshConfig {
@@ -314,6 +317,7 @@ impl MeshConfig {
             openfoam: OpenFoamConfig::default(),
             febio: Default::default(),
             fe: Default::default(),
+            material: Default::default(),
         };
         match preset {
             Preset::Coarse => {}
@@ -344,9 +348,10 @@ impl MeshConfig {
     /// and change only what differs.
     pub fn from_case_file(path: &Path, forced_preset: Option<Preset>) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, "cannot read the case file", e))?;
-        let value: toml::Table = toml::from_str(&text)
-            .map_err(|e| Error::input(path, format!("not a valid TOML case file: {e}")))?;
+        let value: toml::Table =
+            toml::from_str(&text).map_err(|e| Error::input(path, format!("not a valid TOML case file: {e}")))?;
         let mut value = value;
+        crate::writers::material::check_removed_keys(&value, path)?;
         let file_preset = match value.remove("preset") {
             Some(toml::Value::String(s)) => Some(s.parse::<Preset>().map_err(|e| Error::input(path, e))?),
             Some(_) => return Err(Error::input(path, "`preset` must be a string: coarse, medium or fine")),
@@ -356,9 +361,9 @@ impl MeshConfig {
         let base = toml::Value::try_from(MeshConfig::preset(preset))
             .map_err(|e| Error::Config(format!("internal: cannot serialise preset: {e}")))?;
         let merged = merge(base, toml::Value::Table(value));
-        let config: MeshConfig = merged
-            .try_into()
-            .map_err(|e| Error::input(path, format!("invalid case file: {e}. `vesselhex mesh --help` lists the keys")))?;
+        let config: MeshConfig = merged.try_into().map_err(|e| {
+            Error::input(path, format!("invalid case file: {e}. `vesselhex mesh --help` lists the keys"))
+        })?;
         config.validate()?;
         Ok(config)
     }
@@ -427,6 +432,7 @@ impl MeshConfig {
             return bad("centerline.trim_inlet/trim_outlet", "must not be negative");
         }
         self.febio.validate()?;
+        self.material.validate()?;
         Ok(())
     }
 }

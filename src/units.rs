@@ -98,6 +98,10 @@ impl MechanicalUnits {
     pub fn stress(&self, pa: f64) -> f64 {
         scale10(pa, self.length_exp - self.mass_exp)
     }
+    /// A stress in kPa, in deck units.
+    pub fn stress_from_kpa(&self, kpa: f64) -> f64 {
+        scale10(kpa, self.length_exp - self.mass_exp + 3)
+    }
     /// A stress in MPa, in deck units.
     pub fn stress_from_mpa(&self, mpa: f64) -> f64 {
         scale10(mpa, self.length_exp - self.mass_exp + 6)
@@ -152,6 +156,7 @@ mod tests {
         assert_eq!(mm.density(1060.0), 1.06e-9);
         assert_eq!(mm.stress(2.2e9), 2200.0);
         assert_eq!(mm.stress_from_mpa(0.0133322), 0.0133322);
+        assert_eq!(mm.stress_from_kpa(23.632), 0.023632);
         assert_eq!(mm.velocity(0.1), 100.0);
         let cm = MechanicalUnits::of(LengthUnit::Cm);
         assert_eq!(cm.stress(1.0), 10.0); // 1 Pa = 10 dyn/cm^2

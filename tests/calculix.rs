@@ -68,7 +68,10 @@ fn solve(mesh: &VesselMesh, options: &WriteOptions, name: &str) -> Run {
         out.status.code(),
         started.elapsed().as_secs_f64(),
         mesh.wall_range().len(),
-        log.lines().filter(|l| l.contains("Job finished") || l.contains("Total CalculiX Time") || l.contains("increment")).collect::<Vec<_>>().join("\n"),
+        log.lines()
+            .filter(|l| l.contains("Job finished") || l.contains("Total CalculiX Time") || l.contains("increment"))
+            .collect::<Vec<_>>()
+            .join("\n"),
         sta
     );
     assert!(out.status.success(), "{name}: ccx failed:\n{log}");
@@ -140,7 +143,10 @@ fn default_fibre_deck_runs_and_every_lumen_node_moves_outward() {
         assert!(ur > 0.0, "lumen node {} moves inward: u_r = {ur}", i + 1);
     }
     let (mean, r, _) = inner_radial(&mesh, &disp);
-    eprintln!("default HGO deck: {} lumen nodes, u_r min {min_ur:.5} mm, mean {mean:.5} mm at r = {r:.4} mm", interface.len());
+    eprintln!(
+        "default HGO deck: {} lumen nodes, u_r min {min_ur:.5} mm, mean {mean:.5} mm at r = {r:.4} mm",
+        interface.len()
+    );
     // The end rings hold axially.
     for end in ["wall_inlet", "wall_outlet"] {
         for &i in &mesh.node_sets[end] {
@@ -163,15 +169,16 @@ fn linear_elastic_tube_matches_lame() {
     options.fe.material = MaterialModel::LinearElastic;
     options.fe.calculix_element = ElementType::C3D8I;
     let (e, nu) = (100.0, 0.3);
-    for l in [&mut options.fe.intima, &mut options.fe.media, &mut options.fe.adventitia] {
-        l.youngs_modulus = e;
+    for l in [&mut options.material.intima, &mut options.material.media, &mut options.material.adventitia] {
+        l.youngs_modulus_kpa = 1e3 * e;
         l.poisson_ratio = nu;
     }
     let run = solve(&mesh, &options, "lame");
     let disp = frd_displacements(&run.dir);
     let (got, a, _) = inner_radial(&mesh, &disp);
     let outer = &mesh.node_sets[sets::OUTER_WALL_NODES];
-    let b = outer.iter().map(|&i| mesh.nodes[i as usize].x.hypot(mesh.nodes[i as usize].y)).sum::<f64>() / outer.len() as f64;
+    let b = outer.iter().map(|&i| mesh.nodes[i as usize].x.hypot(mesh.nodes[i as usize].y)).sum::<f64>()
+        / outer.len() as f64;
     let p = 100.0 * MMHG_IN_MPA;
     // Plane strain (ends held axially): u(a) = (1 + nu) p a / (E (b^2 - a^2)) ((1 - 2 nu) a^2 + b^2).
     let expected = (1.0 + nu) * p * a / (e * (b * b - a * a)) * ((1.0 - 2.0 * nu) * a * a + b * b);
@@ -189,10 +196,10 @@ fn circumferential_fibres_stiffen_the_inflation_more_than_axial_ones() {
     // Stiff enough ground matrix that the tube also holds 100 mmHg with axial fibres (which
     // carry no hoop load under plane strain): a neo-Hookean tube cannot hold more than about
     // mu ln(b/a) = 0.2 ln(1.2) = 0.036 MPa.
-    for l in [&mut options.fe.intima, &mut options.fe.media, &mut options.fe.adventitia] {
-        l.c10 = 0.1;
-        l.d = 2.0 / (100.0 * 0.2);
-        l.k1 = 0.1;
+    for l in [&mut options.material.intima, &mut options.material.media, &mut options.material.adventitia] {
+        l.c_kpa = 200.0;
+        l.bulk_kpa = 100.0 * 200.0;
+        l.k1_kpa = 100.0;
         l.k2 = 2.0;
     }
     let mut increase = Vec::new();
@@ -202,7 +209,10 @@ fn circumferential_fibres_stiffen_the_inflation_more_than_axial_ones() {
         let run = solve(&mesh, &options, &format!("beta{beta}"));
         let disp = frd_displacements(&run.dir);
         let (u, r, min_u) = inner_radial(&mesh, &disp);
-        eprintln!("beta = {beta} deg: mean inner radius increase {u:.6} mm ({:.3} % of {r:.4} mm), min {min_u:.6}", 100.0 * u / r);
+        eprintln!(
+            "beta = {beta} deg: mean inner radius increase {u:.6} mm ({:.3} % of {r:.4} mm), min {min_u:.6}",
+            100.0 * u / r
+        );
         assert!(min_u > 0.0);
         increase.push(u);
     }

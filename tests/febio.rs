@@ -108,8 +108,10 @@ fn ints(text: &str) -> Result<Vec<u32>, String> {
 }
 
 fn vec3(text: &str) -> Result<Vector3<f64>, String> {
-    let v: Vec<f64> =
-        text.split(',').map(|s| s.trim().parse::<f64>().map_err(|_| format!("not a vector: '{text}'"))).collect::<Result<_, _>>()?;
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f64>().map_err(|_| format!("not a vector: '{text}'")))
+        .collect::<Result<_, _>>()?;
     if v.len() != 3 {
         return Err(format!("not a 3-vector: '{text}'"));
     }
@@ -122,7 +124,8 @@ fn vec3(text: &str) -> Result<Vector3<f64>, String> {
 
 /// FEBio's own hex8 face table (FEElement::GetFace, FORMATS.md 2b), written out independently of
 /// vesselhex's.
-const FEBIO_HEX8_FACES: [[usize; 4]; 6] = [[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7], [0, 3, 2, 1], [4, 5, 6, 7]];
+const FEBIO_HEX8_FACES: [[usize; 4]; 6] =
+    [[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7], [0, 3, 2, 1], [4, 5, 6, 7]];
 /// For each corner, three neighbours forming a right-handed frame in a valid hex8.
 const CORNER_FRAMES: [[usize; 3]; 8] =
     [[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7], [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]];
@@ -245,7 +248,10 @@ impl Deck {
         self.root.one("Mesh").map(|m| m.all(kind).collect()).unwrap_or_default()
     }
     fn node_set(&self, name: &str) -> Option<Vec<u32>> {
-        self.mesh_children("NodeSet").into_iter().find(|s| s.attr("name") == Some(name)).and_then(|s| ints(&s.text).ok())
+        self.mesh_children("NodeSet")
+            .into_iter()
+            .find(|s| s.attr("name") == Some(name))
+            .and_then(|s| ints(&s.text).ok())
     }
     fn surface(&self, name: &str) -> Option<&El> {
         self.mesh_children("Surface").into_iter().find(|s| s.attr("name") == Some(name))
@@ -550,7 +556,8 @@ fn fsi_text() -> &'static str {
 /// The verified example decks, found above the crate (shared/docs/examples) or in
 /// $VESSELHEX_DOCS/examples.
 fn example(name: &str) -> Option<String> {
-    let mut candidates: Vec<PathBuf> = std::env::var_os("VESSELHEX_DOCS").map(|d| vec![PathBuf::from(d)]).unwrap_or_default();
+    let mut candidates: Vec<PathBuf> =
+        std::env::var_os("VESSELHEX_DOCS").map(|d| vec![PathBuf::from(d)]).unwrap_or_default();
     candidates.extend(common::crate_dir().ancestors().map(|a| a.join("shared/docs")));
     for dir in candidates {
         let p = dir.join("examples").join(name);
@@ -662,7 +669,8 @@ fn broken_decks_fail_the_checks() {
     let e = check_all(&dropped, "solid").unwrap_err();
     assert!(e.contains("lid 7") && e.contains("0 mat_axis entries"), "{e}");
     // MeshData before MeshDomains
-    let (md0, md1) = (text.find("  <MeshData>").unwrap(), text.find("  </MeshData>\n").unwrap() + "  </MeshData>\n".len());
+    let (md0, md1) =
+        (text.find("  <MeshData>").unwrap(), text.find("  </MeshData>\n").unwrap() + "  </MeshData>\n".len());
     let doms = text.find("  <MeshDomains>").unwrap();
     let swapped = format!("{}{}{}{}", &text[..doms], &text[md0..md1], &text[doms..md0], &text[md1..]);
     assert!(check_all(&swapped, "solid").unwrap_err().contains("out of order"));
@@ -674,7 +682,11 @@ fn broken_decks_fail_the_checks() {
     let repeated = format!("{}{}{}", &text[..second], first_id, &text[second_end..]);
     assert!(Deck::read(&repeated).unwrap_err().contains("increase strictly"));
     let set = text.find("<NodeSet name=\"wall_inlet\">").unwrap();
-    let children = format!("{}<NodeSet name=\"wall_inlet\"><n id=\"1\"/></NodeSet>\n{}", &text[..set], &text[set..].split_once('\n').unwrap().1);
+    let children = format!(
+        "{}<NodeSet name=\"wall_inlet\"><n id=\"1\"/></NodeSet>\n{}",
+        &text[..set],
+        &text[set..].split_once('\n').unwrap().1
+    );
     assert!(check_all(&children, "solid").unwrap_err().contains("not a leaf"));
     let unresolved = text.replace("mat=\"media\"", "mat=\"Media\"");
     assert!(check_all(&unresolved, "solid").unwrap_err().contains("unknown material"));
@@ -726,7 +738,8 @@ fn end_rings_are_held_axially_and_rigid_modes_removed() {
         assert!(set.iter().any(|i| d.point(*i)[j] > 0.1) && set.iter().any(|i| d.point(*i)[j] < -0.1));
     }
     // pressure ramps to 100 mmHg = 0.0133322 MPa
-    let p: f64 = d.root.one("Loads").unwrap().one("surface_load").unwrap().one("pressure").unwrap().text.parse().unwrap();
+    let p: f64 =
+        d.root.one("Loads").unwrap().one("surface_load").unwrap().one("pressure").unwrap().text.parse().unwrap();
     assert!((p - 0.0133322387415).abs() < 1e-12);
 }
 
@@ -834,7 +847,9 @@ fn structure(d: &Deck) -> Vec<(String, Vec<String>)> {
 
 #[test]
 fn decks_have_the_structure_of_the_verified_examples() {
-    for (ours, name, module) in [(wall_text(), "febio_wall_tube.feb", "solid"), (fsi_text(), "febio_fsi_tube.feb", "fluid-FSI")] {
+    for (ours, name, module) in
+        [(wall_text(), "febio_wall_tube.feb", "solid"), (fsi_text(), "febio_fsi_tube.feb", "fluid-FSI")]
+    {
         let Some(example) = example(name) else { return };
         // the checks accept the decks FEBio ran (so they test FEBio's rules, not our habits)
         // (their axes carry 8 significant digits, ours full precision)
@@ -902,10 +917,12 @@ fn metres_give_kilograms_and_pascals() {
         let q = mesh.nodes[*id as usize - 1];
         assert!((p.coords - q.coords * 1e-3).norm() <= 1e-15 * q.coords.norm().max(1.0), "{id}");
     }
-    let p: f64 = d.root.one("Loads").unwrap().one("surface_load").unwrap().one("pressure").unwrap().text.parse().unwrap();
+    let p: f64 =
+        d.root.one("Loads").unwrap().one("surface_load").unwrap().one("pressure").unwrap().text.parse().unwrap();
     assert!((p - 13332.2387415).abs() < 1e-6);
     let media = d.root.one("Material").unwrap().all("material").find(|m| m.attr("name") == Some("media")).unwrap();
-    assert!((media.one("c").unwrap().text.parse::<f64>().unwrap() - 3000.0).abs() < 1e-9);
+    // the shared default: HGO 2000 media with c x10 = 30 kPa
+    assert!((media.one("c").unwrap().text.parse::<f64>().unwrap() - 30e3).abs() < 1e-9);
     assert_eq!(media.one("gamma").unwrap().text, "29");
     let fsi = fsi_deck(mesh, &options(LengthUnit::M)).unwrap();
     let f = check_all(&fsi, "fluid-FSI").unwrap();
@@ -920,4 +937,180 @@ fn coordinates_keep_full_precision() {
     for (id, p) in &d.nodes {
         assert_eq!(*p, mesh.nodes[*id as usize - 1], "node {id}");
     }
+}
+
+// ------------------------------------------------------------------------------------------------
+// hex20
+// ------------------------------------------------------------------------------------------------
+
+/// FEBio's hex20 mid-edge nodes 9..20 (0-based 8..19) and the corners of their edges, read off
+/// `FEHex20::shape_fnc` (node 8 is (1 - r^2)(1 - s)(1 - t): the edge from corner 0 to 1, ...),
+/// written out here independently of vesselhex's edge table.
+const FEBIO_HEX20_EDGES: [[usize; 2]; 12] =
+    [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4], [0, 4], [1, 5], [2, 6], [3, 7]];
+/// FEBio's hex20 faces as quad8 facets (`FEMesh::GetFace`): corners, then mid-edge nodes.
+const FEBIO_HEX20_FACES: [[usize; 8]; 6] = [
+    [0, 1, 5, 4, 8, 17, 12, 16],
+    [1, 2, 6, 5, 9, 18, 13, 17],
+    [2, 3, 7, 6, 10, 19, 14, 18],
+    [3, 0, 4, 7, 11, 16, 15, 19],
+    [0, 3, 2, 1, 11, 10, 9, 8],
+    [4, 5, 6, 7, 12, 13, 14, 15],
+];
+
+fn hex20_options() -> WriteOptions {
+    let mut o = options(LengthUnit::Mm);
+    o.febio.element = vesselhex::writers::febio::FebioElement::Hex20;
+    o
+}
+
+fn hex20_text() -> &'static str {
+    static T: OnceLock<String> = OnceLock::new();
+    T.get_or_init(|| wall_deck(tube(), &hex20_options()).unwrap())
+}
+
+fn is_midpoint(m: Point3<f64>, a: Point3<f64>, b: Point3<f64>) -> bool {
+    let mid = Point3::from((a.coords + b.coords) * 0.5);
+    (m - mid).norm() <= 1e-12 * mid.coords.norm().max((b - a).norm())
+}
+
+#[test]
+fn hex20_wall_deck_obeys_the_reader_rules_with_midpoint_nodes() {
+    let mesh = tube();
+    let text = hex20_text();
+    let d = check_all(text, "solid").unwrap();
+    let wall = mesh.wall_range();
+    let corners: BTreeSet<u32> = mesh.nodes_of(wall.clone()).iter().map(|n| n + 1).collect();
+    let mut mids_seen = BTreeSet::new();
+    for (b, r) in d.blocks.iter().zip(Region::WALL) {
+        assert_eq!(b.elems.len(), mesh.count(r));
+        for (id, conn) in &b.elems {
+            // 20 distinct nodes, the 8 corners the mesh's
+            assert_eq!(conn.len(), 20);
+            assert_eq!(conn.iter().collect::<BTreeSet<_>>().len(), 20, "element {id}");
+            assert_eq!(conn[..8], mesh.hexes[*id as usize - 1].map(|n| n + 1));
+            // every mid-edge node at the midpoint of its corner edge, in FEBio's order
+            for (k, [a, b]) in FEBIO_HEX20_EDGES.iter().enumerate() {
+                let m = conn[8 + k];
+                assert!(!corners.contains(&m), "element {id}: node {m} is a corner and a mid-edge node");
+                assert!(is_midpoint(d.point(m), d.point(conn[*a]), d.point(conn[*b])), "element {id} node {}", 9 + k);
+                mids_seen.insert(m);
+            }
+        }
+        assert_eq!(d.materials[r.name()], "Holzapfel-Gasser-Ogden");
+    }
+    // every written node is a corner or a mid-edge node of the wall; one mid-edge node per edge
+    assert_eq!(d.nodes.len(), corners.len() + mids_seen.len());
+    let edges: BTreeSet<(u32, u32)> = wall
+        .clone()
+        .flat_map(|e| FEBIO_HEX20_EDGES.map(|[a, b]| (mesh.hexes[e][a], mesh.hexes[e][b])))
+        .map(|(a, b)| (a.min(b), a.max(b)))
+        .collect();
+    assert_eq!(mids_seen.len(), edges.len());
+    // mid-edge labels follow every mesh node: ids still increase
+    assert!(mids_seen.iter().all(|m| *m as usize > mesh.nodes.len()));
+    eprintln!(
+        "hex20 wall.feb: {} bytes, {} lines; {} hex20, {} nodes ({} corners + {} mid-edge)",
+        text.len(),
+        text.lines().count(),
+        wall.len(),
+        d.nodes.len(),
+        corners.len(),
+        mids_seen.len()
+    );
+}
+
+#[test]
+fn hex20_facets_are_quad8_faces_of_their_element_and_point_outward() {
+    let mesh = tube();
+    let d = Deck::read(hex20_text()).unwrap();
+    let owners = face_owners(&d.solid_blocks());
+    for name in [sets::WALL_LUMEN_FACES, sets::WALL_OUTER_FACES] {
+        let s = d.surface(name).unwrap();
+        assert_eq!(s.children.len(), mesh.face_sets[name].len());
+        for f in &s.children {
+            assert_eq!(f.name, "quad8", "{name}");
+            let n = ints(&f.text).unwrap();
+            assert_eq!(n.len(), 8);
+            // nodes 5..8 are the midpoints of the facet edges 1-2, 2-3, 3-4, 4-1
+            for i in 0..4 {
+                assert!(
+                    is_midpoint(d.point(n[4 + i]), d.point(n[i]), d.point(n[(i + 1) % 4])),
+                    "{name} {:?}",
+                    f.attr("id")
+                );
+            }
+            // and the facet is one of FEBio's hex20 faces of its element, up to the starting corner
+            let own = &owners[&face_key(&n)];
+            assert_eq!(own.len(), 1);
+            let conn = &own[0].1;
+            let matches = FEBIO_HEX20_FACES.iter().any(|face| {
+                (0..4)
+                    .any(|k| (0..4).all(|i| n[i] == conn[face[(i + k) % 4]] && n[4 + i] == conn[face[4 + (i + k) % 4]]))
+            });
+            assert!(matches, "{name} facet {:?} is no hex20 face of element {}", f.attr("id"), own[0].0);
+        }
+        check_outward(&d, name, &d.solid_blocks()).unwrap();
+    }
+    // mat_axis: one entry per element, the element's triad
+    check_mat_axis(&d, 1e-9).unwrap();
+    let md = d.root.one("MeshData").unwrap();
+    for r in Region::WALL {
+        let map = md.all("ElementData").find(|e| e.attr("elem_set") == Some(r.name())).unwrap();
+        assert_eq!(map.children.len(), mesh.count(r));
+    }
+}
+
+#[test]
+fn hex20_node_sets_hold_the_mid_edge_nodes_of_their_rings() {
+    let mesh = tube();
+    let d = Deck::read(hex20_text()).unwrap();
+    let corners_only = Deck::read(wall_text()).unwrap();
+    for end in &mesh.ends {
+        let name = sets::wall_end(&end.name);
+        let ring = d.node_set(&name).unwrap();
+        let ring8 = corners_only.node_set(&name).unwrap();
+        assert!(ring.len() > ring8.len(), "{name}: no mid-edge nodes");
+        // every node of the set, mid-edge ones included, lies in the end plane
+        for id in &ring {
+            let off = (d.point(*id) - end.centre).dot(&end.outward_normal);
+            assert!(off.abs() < 1e-9, "{name}: node {id} is {off} off the end plane");
+        }
+        // the corners, plus one mid-edge node per wall edge between two of them
+        assert!(ring8.iter().all(|n| ring.contains(n)));
+        let members: BTreeSet<u32> = ring8.iter().map(|n| n - 1).collect();
+        let ring_edges: BTreeSet<(u32, u32)> = mesh
+            .wall_range()
+            .flat_map(|e| FEBIO_HEX20_EDGES.map(|[a, b]| (mesh.hexes[e][a], mesh.hexes[e][b])))
+            .filter(|(a, b)| members.contains(a) && members.contains(b))
+            .map(|(a, b)| (a.min(b), a.max(b)))
+            .collect();
+        assert_eq!(ring.len(), ring8.len() + ring_edges.len(), "{name}");
+    }
+    let interface = d.node_set(sets::INTERFACE_NODES).unwrap();
+    let lumen_facets: BTreeSet<u32> =
+        d.surface(sets::WALL_LUMEN_FACES).unwrap().children.iter().flat_map(|f| ints(&f.text).unwrap()).collect();
+    assert_eq!(interface.into_iter().collect::<BTreeSet<_>>(), lumen_facets, "interface = the lumen facets' nodes");
+    // the rigid-mode lines: on their symmetry planes, mid-edge nodes included
+    for (k, name) in [(0usize, "rigid_x"), (1, "rigid_y")] {
+        let set = d.node_set(name).unwrap();
+        assert!(set.len() > corners_only.node_set(name).unwrap().len());
+        assert!(set.iter().all(|id| d.point(*id)[k].abs() < 1e-9), "{name}");
+    }
+}
+
+#[test]
+fn hex20_is_refused_by_the_fsi_deck_with_the_key() {
+    let e = fsi_deck(tube(), &hex20_options()).unwrap_err().to_string();
+    assert!(e.contains("febio.element") && e.contains("hex8") && e.contains("febio-fsi"), "{e}");
+    // and the case file key reads
+    let dir = common::temp_dir("febio-hex20-key");
+    let case = dir.join("case.toml");
+    std::fs::write(&case, "[febio]\nelement = \"hex20\"\n").unwrap();
+    let c = MeshConfig::from_case_file(&case, None).unwrap();
+    assert_eq!(c.febio.element, vesselhex::writers::febio::FebioElement::Hex20);
+    std::fs::write(&case, "[febio]\nelement = \"hex27\"\n").unwrap();
+    let e = MeshConfig::from_case_file(&case, None).unwrap_err().to_string();
+    assert!(e.contains("hex27") && e.contains("case.toml"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
 }

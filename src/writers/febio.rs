@@ -6,11 +6,22 @@
 //!   per-element `mat_axis` (`a` = e_circ, `d` = e_long, so FEBio's fibres lie at +-gamma from the
 //!   circumferential direction in the circumferential-longitudinal plane), the lumen pressure ramped
 //!   to [`FebioConfig::lumen_pressure_mmhg`], end rings held axially and the in-plane rigid modes
-//!   removed on symmetry lines of the end rings.
+//!   removed on symmetry lines of the end rings. `hex8` by default; `[febio] element = "hex20"`
+//!   writes 20-node bricks (corners, then the mid-edge nodes in FEBio's order, which is C3D20's:
+//!   edges 1-2, 2-3, 3-4, 4-1, 5-6, 6-7, 7-8, 8-5, 1-5, 2-6, 3-7, 4-8) with `quad8` facets, the
+//!   mid-edge nodes and their labels shared with the CalculiX and Abaqus C3D20 decks
+//!   ([`MidEdges`]); node sets then include the mid-edge nodes of their rings and surfaces.
 //! * `febio/fsi.feb` (format `febio-fsi`, Module `fluid-FSI`): the lumen as a `fluid-FSI` domain
 //!   (blood) and the three layers as solid domains sharing the interface nodes; `fluid-FSI
 //!   traction` and no-slip on the interface, a parabolic inlet velocity, outlet pressure with
 //!   backflow stabilization, a dynamic analysis whose loads ramp over [`FsiControl::ramp_s`].
+//!   Always hex8 (hex20 is refused: FEBio's fluid-FSI needs lumen and wall to share every
+//!   interface node, and FORMATS.md 2b documents it on hex8 only). One inlet surface carries the
+//!   inflow; every outlet end gets its own pressure and backflow surface.
+//!
+//! Wall materials: the shared per-layer constants of `[material]`
+//! ([`WallMaterial`](super::material::WallMaterial), the same as the .inp decks'), the fibre angle
+//! `gamma` from the mesh's layers.
 //!
 //! Both decks follow the reader rules of `FORMATS.md` 2b and the structure of the two decks FEBio
 //! 4.11 ran to normal termination (`docs/examples/febio_*_tube.feb`). Labels are the mesh's:
@@ -26,6 +37,8 @@
 //! and converted to the deck's consistent system, stated in a comment at the top of each deck:
 //! length = the output unit, time s, force N, hence mm -> tonne and MPa, m -> kg and Pa.
 
+use super::inp::MidEdges;
+use super::material::WallMaterial;
 use super::{write_atomic, WriteOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{face_nodes, sets, ElementFace, Region, VesselMesh};
@@ -53,23 +66,33 @@ const MMHG_PA: f64 = 133.322387415;
 // Configuration
 // ------------------------------------------------------------------------------------------------
 
-/// Holzapfel-Gasser-Ogden constants of one layer (FEBio `Holzapfel-Gasser-Ogden`, uncoupled). The
-/// fibre angle `gamma` is the layer's `fibre_angle_deg` from the wall configuration.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct HgoConstants {
-    /// Ground-matrix neo-Hookean constant c (psi = c/2 (I1 - 3)), kPa.
-    pub c_kpa: f64,
-    /// Fibre stiffness k1, kPa.
-    pub k1_kpa: f64,
-    /// Fibre exponent k2, dimensionless.
-    pub k2: f64,
-    /// Fibre dispersion, 0 (aligned) to 1/3 (isotropic).
-    pub kappa: f64,
-    /// Penalty bulk modulus k of the uncoupled formulation, kPa.
-    pub bulk_kpa: f64,
-    /// Mass density, kg/m^3 (needed by the dynamic FSI analysis).
-    pub density_kg_m3: f64,
+/// Element type of the FEBio wall deck.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum FebioElement {
+    /// Trilinear brick.
+    #[default]
+    Hex8,
+    /// 20-node serendipity brick: the corners and one node per edge midpoint, the mid-edge nodes
+    /// and their labels shared with the CalculiX/Abaqus C3D20 decks ([`MidEdges`]); surfaces are
+    /// `quad8` facets. `wall.feb` only: `fsi.feb` refuses it.
+    Hex20,
+}
+
+impl FebioElement {
+    pub fn name(self) -> &'static str {
+        match self {
+            FebioElement::Hex8 => "hex8",
+            FebioElement::Hex20 => "hex20",
+        }
+    }
+    /// The facet tag of the element's faces.
+    pub fn facet(self) -> &'static str {
+        match self {
+            FebioElement::Hex8 => "quad4",
+            FebioElement::Hex20 => "quad8",
+        }
+    }
 }
 
 /// Blood as FEBio's `fluid-FSI` material.
@@ -126,49 +149,28 @@ impl Default for FsiControl {
     }
 }
 
-/// The `[febio]` section of the case file.
-///
-/// Default wall constants and their sources (`FORMATS.md` section 4):
-/// * media: Holzapfel, Gasser, Ogden 2000 (J Elasticity 61:1-48, rabbit carotid): c = 3.0 kPa,
-///   k1 = 2.3632 kPa, k2 = 0.8393; adventitia from the same paper: c = 0.3 kPa, k1 = 0.562 kPa,
-///   k2 = 0.7112 (the fibre angles 29 and 62 deg of the wall configuration come from it too);
-/// * intima: taken equal to the media, as is common when the intima is not characterised;
-/// * kappa = 0: the 2000 model has no dispersion (it is also what CalculiX's fibre material,
-///   which has none, computes, so both decks describe the same law);
-/// * bulk modulus 3 MPa, 1000 times the largest c: HGO 2000 assume incompressibility;
-/// * density 1200 kg/m^3 (soft tissue; only the FSI deck's dynamics use it).
-///
-/// These are rabbit-carotid constants: soft. Give your own tissue's values for a human vessel.
+/// The `[febio]` section of the case file: element type, loads and controls. The wall's layer
+/// constants are the shared `[material]` ([`super::material::WallMaterial`]), the same as the
+/// CalculiX and Abaqus decks'.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FebioConfig {
+    /// Element of `wall.feb`: `hex8` (default) or `hex20`.
+    pub element: FebioElement,
     /// Lumen pressure at the end of the static ramp of `wall.feb`, mmHg.
     pub lumen_pressure_mmhg: f64,
     /// Steps of the static ramp of `wall.feb` (the load reaches its value at t = 1).
     pub static_steps: usize,
-    pub intima: HgoConstants,
-    pub media: HgoConstants,
-    pub adventitia: HgoConstants,
     pub blood: BloodConstants,
     pub fsi: FsiControl,
 }
 
 impl Default for FebioConfig {
     fn default() -> Self {
-        let media = HgoConstants {
-            c_kpa: 3.0,
-            k1_kpa: 2.3632,
-            k2: 0.8393,
-            kappa: 0.0,
-            bulk_kpa: 3000.0,
-            density_kg_m3: 1200.0,
-        };
         FebioConfig {
+            element: FebioElement::Hex8,
             lumen_pressure_mmhg: 100.0,
             static_steps: 10,
-            intima: media,
-            media,
-            adventitia: HgoConstants { c_kpa: 0.3, k1_kpa: 0.562, k2: 0.7112, ..media },
             blood: BloodConstants::default(),
             fsi: FsiControl::default(),
         }
@@ -181,20 +183,6 @@ impl FebioConfig {
         let bad = |key: &str, why: &str| Err(Error::Config(format!("febio.{key}: {why}")));
         let positive = |x: f64| x > 0.0 && x.is_finite();
         let non_negative = |x: f64| x >= 0.0 && x.is_finite();
-        for (name, h) in [("intima", &self.intima), ("media", &self.media), ("adventitia", &self.adventitia)] {
-            if !positive(h.c_kpa) {
-                return bad(&format!("{name}.c_kpa"), "must be positive");
-            }
-            if !non_negative(h.k1_kpa) || !non_negative(h.k2) {
-                return bad(&format!("{name}.k1_kpa/k2"), "must not be negative");
-            }
-            if !(0.0..=1.0 / 3.0).contains(&h.kappa) {
-                return bad(&format!("{name}.kappa"), "must be between 0 and 1/3 (FEBio rejects larger values)");
-            }
-            if !positive(h.bulk_kpa) || !positive(h.density_kg_m3) {
-                return bad(&format!("{name}.bulk_kpa/density_kg_m3"), "must be positive");
-            }
-        }
         let b = &self.blood;
         if !positive(b.density_kg_m3) || !positive(b.bulk_modulus_pa) || !positive(b.viscosity_pa_s) {
             return bad("blood", "density, bulk modulus and viscosity must be positive");
@@ -206,7 +194,10 @@ impl FebioConfig {
         if !positive(f.ramp_s) || !positive(f.step_size_s) || f.time_steps == 0 {
             return bad("fsi", "ramp_s and step_size_s must be positive and time_steps at least 1");
         }
-        if !f.inlet_mean_velocity_m_s.is_finite() || !f.outlet_pressure_mmhg.is_finite() || !non_negative(f.backflow_beta) {
+        if !f.inlet_mean_velocity_m_s.is_finite()
+            || !f.outlet_pressure_mmhg.is_finite()
+            || !non_negative(f.backflow_beta)
+        {
             return bad("fsi", "inlet velocity and outlet pressure must be finite, backflow_beta not negative");
         }
         Ok(())
@@ -319,7 +310,7 @@ impl Xml {
     }
 }
 
-fn comma_list(ids: impl Iterator<Item = u32>) -> String {
+fn comma_list(ids: impl Iterator<Item = u64>) -> String {
     let mut s = String::new();
     for (i, id) in ids.enumerate() {
         if i > 0 {
@@ -355,35 +346,34 @@ fn control(xml: &mut Xml, template: (&str, &str), time_steps: usize, step_size: 
     Ok(())
 }
 
-/// The HGO constants of a wall region.
-fn hgo_of(cfg: &FebioConfig, region: Region) -> &HgoConstants {
-    match region {
-        Region::Intima => &cfg.intima,
-        Region::Media => &cfg.media,
-        _ => &cfg.adventitia,
-    }
-}
-
-/// One `Holzapfel-Gasser-Ogden` material per wall layer, ids from `first_id`, named as the layer.
-fn wall_materials(xml: &mut Xml, mesh: &VesselMesh, cfg: &FebioConfig, u: DeckUnits, first_id: usize) -> Result<()> {
+/// One `Holzapfel-Gasser-Ogden` material per wall layer, ids from `first_id`, named as the layer,
+/// with the shared wall constants and the layer's fibre angle as `gamma`.
+fn wall_materials(
+    xml: &mut Xml,
+    mesh: &VesselMesh,
+    material: &WallMaterial,
+    u: DeckUnits,
+    first_id: usize,
+) -> Result<()> {
     for (i, region) in Region::WALL.into_iter().enumerate() {
         let layer = mesh.layers.iter().find(|l| l.region == region).ok_or_else(|| {
             Error::Geometry(format!("FEBio: the mesh has no {} layer (its fibre angle is needed)", region.name()))
         })?;
-        let h = hgo_of(cfg, region);
+        let m = material.layer(region);
+        m.check(region.name())?;
         let text = fill_template(
             TEMPLATE_HGO.0,
             TEMPLATE_HGO.1,
             &[
                 ("id", (first_id + i).to_string()),
                 ("name", region.name().to_string()),
-                ("density", param(u.density(h.density_kg_m3))),
-                ("c", param(u.stress(h.c_kpa * 1e3))),
-                ("k1", param(u.stress(h.k1_kpa * 1e3))),
-                ("k2", param(h.k2)),
-                ("kappa", param(h.kappa)),
+                ("density", param(m.density(&u))),
+                ("c", param(m.c(&u))),
+                ("k1", param(m.k1(&u))),
+                ("k2", param(m.k2)),
+                ("kappa", param(m.kappa)),
                 ("gamma", param(layer.fibre_angle_deg)),
-                ("k", param(u.stress(h.bulk_kpa * 1e3))),
+                ("k", param(m.bulk(&u))),
             ],
         )?;
         xml.fragment(&text);
@@ -391,39 +381,77 @@ fn wall_materials(xml: &mut Xml, mesh: &VesselMesh, cfg: &FebioConfig, u: DeckUn
     Ok(())
 }
 
-/// `<Nodes>` with the given (sorted) node indices, labelled index + 1.
-fn nodes(xml: &mut Xml, mesh: &VesselMesh, name: &str, which: &[u32], u: DeckUnits) {
+/// `<Nodes>` with the given (sorted) node indices, labelled index + 1, then the mid-edge nodes
+/// of a hex20 deck (labelled after every mesh node, so ids keep increasing).
+fn nodes(xml: &mut Xml, mesh: &VesselMesh, name: &str, which: &[u32], mids: Option<&MidEdges>, u: DeckUnits) {
     let s = u.length.from_mm();
     xml.open("Nodes", &[("name", name)]);
-    for &n in which {
-        let p = mesh.nodes[n as usize];
+    let node = |xml: &mut Xml, label: u64, p: nalgebra::Point3<f64>| {
         xml.indent();
-        let _ = writeln!(xml.out, "<node id=\"{}\">{},{},{}</node>", n + 1, num(p.x * s), num(p.y * s), num(p.z * s));
+        let _ = writeln!(xml.out, "<node id=\"{label}\">{},{},{}</node>", num(p.x * s), num(p.y * s), num(p.z * s));
+    };
+    for &n in which {
+        node(xml, n as u64 + 1, mesh.nodes[n as usize]);
+    }
+    if let Some(m) = mids {
+        for k in 0..m.len() as u32 {
+            node(xml, m.label(mesh, k), m.position(mesh, k));
+        }
     }
     xml.close("Nodes");
 }
 
-/// `<Elements type="hex8">` of one region, named as the region, labelled index + 1.
-fn elements(xml: &mut Xml, mesh: &VesselMesh, region: Region) {
-    xml.open("Elements", &[("type", "hex8"), ("name", region.name())]);
+/// `<Elements>` of one region, named as the region, labelled index + 1: `hex8`, or `hex20` with
+/// the twelve mid-edge nodes after the corners.
+fn elements(xml: &mut Xml, mesh: &VesselMesh, region: Region, mids: Option<&MidEdges>) {
+    let kind = if mids.is_some() { FebioElement::Hex20 } else { FebioElement::Hex8 };
+    xml.open("Elements", &[("type", kind.name()), ("name", region.name())]);
     for e in mesh.region_range(region) {
+        let corners = mesh.hexes[e].iter().map(|&n| n as u64 + 1);
+        let text = match mids {
+            Some(m) => comma_list(corners.chain(m.of_element(e).iter().map(|&k| m.label(mesh, k)))),
+            None => comma_list(corners),
+        };
         xml.indent();
-        let _ = writeln!(xml.out, "<elem id=\"{}\">{}</elem>", e + 1, comma_list(mesh.hexes[e].iter().map(|n| n + 1)));
+        let _ = writeln!(xml.out, "<elem id=\"{}\">{text}</elem>", e + 1);
     }
     xml.close("Elements");
 }
 
-fn node_set(xml: &mut Xml, name: &str, nodes: &[u32]) {
-    xml.leaf("NodeSet", &[("name", name)], &comma_list(nodes.iter().map(|n| n + 1)));
+/// Labels of mesh nodes (0-based, sorted) with their quadratic completion in a hex20 deck (the
+/// mid-edge nodes whose two corners are members: the ring or surface the set describes).
+fn set_labels(mesh: &VesselMesh, mids: Option<&MidEdges>, members: &[u32]) -> Vec<u64> {
+    let mut labels: Vec<u64> = members.iter().map(|&n| n as u64 + 1).collect();
+    if let Some(m) = mids {
+        labels.extend(m.completing(mesh, members).into_iter().map(|k| m.label(mesh, k)));
+    }
+    labels
 }
 
-/// `<Surface>` of quad4 facets, each wound outward from its element.
-fn surface(xml: &mut Xml, mesh: &VesselMesh, name: &str, faces: &[ElementFace]) {
+/// A `<NodeSet>` of mesh nodes (0-based, sorted), completed in a hex20 deck ([`set_labels`]).
+fn node_set(xml: &mut Xml, mesh: &VesselMesh, mids: Option<&MidEdges>, name: &str, members: &[u32]) {
+    node_set_labels(xml, name, &set_labels(mesh, mids, members));
+}
+
+fn node_set_labels(xml: &mut Xml, name: &str, labels: &[u64]) {
+    xml.leaf("NodeSet", &[("name", name)], &comma_list(labels.iter().copied()));
+}
+
+/// `<Surface>` of facets, each wound outward from its element: `quad4`, or `quad8` (corners, then
+/// the mid-edge nodes of the edges 1-2, 2-3, 3-4, 4-1, as FEBio's hex20 faces list them).
+fn surface(xml: &mut Xml, mesh: &VesselMesh, name: &str, faces: &[ElementFace], mids: Option<&MidEdges>) {
+    let kind = if mids.is_some() { FebioElement::Hex20 } else { FebioElement::Hex8 };
     xml.open("Surface", &[("name", name)]);
     for (i, f) in faces.iter().enumerate() {
-        let q = face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
+        let corners = face_nodes(&mesh.hexes[f.element as usize], f.face as usize).map(|n| n as u64 + 1);
+        let text = match mids {
+            Some(m) => comma_list(
+                corners.into_iter().chain(m.of_face(f.element as usize, f.face as usize).map(|k| m.label(mesh, k))),
+            ),
+            None => comma_list(corners.into_iter()),
+        };
         xml.indent();
-        let _ = writeln!(xml.out, "<quad4 id=\"{}\">{}</quad4>", i + 1, comma_list(q.iter().map(|n| n + 1)));
+        let _ = writeln!(xml.out, "<{tag} id=\"{}\">{text}</{tag}>", i + 1, tag = kind.facet());
     }
     xml.close("Surface");
 }
@@ -445,8 +473,13 @@ fn mat_axes(xml: &mut Xml, mesh: &VesselMesh) {
         for (lid, e) in mesh.region_range(region).enumerate() {
             let t = &mesh.triads[e];
             xml.indent();
-            let _ =
-                writeln!(xml.out, "<elem lid=\"{}\"><a>{}</a><d>{}</d></elem>", lid + 1, vec_text(&t.e_circ), vec_text(&t.e_long));
+            let _ = writeln!(
+                xml.out,
+                "<elem lid=\"{}\"><a>{}</a><d>{}</d></elem>",
+                lid + 1,
+                vec_text(&t.e_circ),
+                vec_text(&t.e_long)
+            );
         }
         xml.close("ElementData");
     }
@@ -543,11 +576,15 @@ pub fn end_supports(mesh: &VesselMesh) -> Result<Vec<EndSupport>> {
             let mut planes: [Vec<u32>; 3] = Default::default();
             let mut complete = true;
             for k in (0..3).filter(|k| *k != axis) {
-                let on_plane: Vec<u32> =
-                    ring.iter().copied().filter(|&i| (mesh.nodes[i as usize][k] - end.centre[k]).abs() <= tol).collect();
+                let on_plane: Vec<u32> = ring
+                    .iter()
+                    .copied()
+                    .filter(|&i| (mesh.nodes[i as usize][k] - end.centre[k]).abs() <= tol)
+                    .collect();
                 // the other transverse coordinate must take both signs (a line through the axis)
                 let j = 3 - axis - k;
-                let side = |sign: f64| on_plane.iter().any(|&i| sign * (mesh.nodes[i as usize][j] - end.centre[j]) > tol);
+                let side =
+                    |sign: f64| on_plane.iter().any(|&i| sign * (mesh.nodes[i as usize][j] - end.centre[j]) > tol);
                 complete &= side(1.0) && side(-1.0);
                 planes[k] = on_plane;
             }
@@ -578,7 +615,10 @@ pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
     let pressure = u.stress(cfg.lumen_pressure_mmhg * MMHG_PA);
 
     let mut comment = vec![
-        format!("vesselhex {}: FEBio 4.0 deck of the artery wall (intima, media, adventitia).", env!("CARGO_PKG_VERSION")),
+        format!(
+            "vesselhex {}: FEBio 4.0 deck of the artery wall (intima, media, adventitia).",
+            env!("CARGO_PKG_VERSION")
+        ),
         format!("Units: {}.", u.describe()),
         "Holzapfel-Gasser-Ogden per layer; per-element mat_axis a = e_circ, d = e_long (element centroid frame),"
             .into(),
@@ -601,14 +641,25 @@ pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
                 s.end, held[0]
             ));
         } else {
-            comment.push(format!("End {}: ring clamped (its normal is not a global axis or no symmetry lines).", s.end));
+            comment
+                .push(format!("End {}: ring clamped (its normal is not a global axis or no symmetry lines).", s.end));
         }
     }
     let wall_nodes = mesh.nodes_of(mesh.wall_range());
-    let mut rigid: [Vec<u32>; 3] = Default::default();
+    let mids = (cfg.element == FebioElement::Hex20).then(|| MidEdges::new(mesh));
+    let mids = mids.as_ref();
+    if let Some(m) = mids {
+        comment.push(format!(
+            "hex20: {} mid-edge nodes at the edge midpoints, labelled from {} (as in the C3D20 decks); quad8 facets.",
+            m.len(),
+            m.label(mesh, 0)
+        ));
+    }
+    // Completed end by end: an axial edge from one end's plane to another's is not on either.
+    let mut rigid: [Vec<u64>; 3] = Default::default();
     for s in &supports {
         for (r, p) in rigid.iter_mut().zip(&s.plane_nodes) {
-            r.extend_from_slice(p);
+            r.extend(set_labels(mesh, mids, p));
         }
     }
     for r in &mut rigid {
@@ -621,26 +672,26 @@ pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
     let steps = cfg.static_steps;
     control(&mut xml, TEMPLATE_CONTROL_STATIC, steps, 1.0 / steps as f64, 1e-3 / steps as f64)?;
     xml.open("Material", &[]);
-    wall_materials(&mut xml, mesh, cfg, u, 1)?;
+    wall_materials(&mut xml, mesh, &options.material, u, 1)?;
     xml.close("Material");
 
     xml.open("Mesh", &[]);
-    nodes(&mut xml, mesh, "wall_nodes", &wall_nodes, u);
+    nodes(&mut xml, mesh, "wall_nodes", &wall_nodes, mids, u);
     for region in Region::WALL {
-        elements(&mut xml, mesh, region);
+        elements(&mut xml, mesh, region, mids);
     }
     for s in &supports {
         let name = sets::wall_end(&s.end);
-        node_set(&mut xml, &name, node_set_of(mesh, &name)?);
+        node_set(&mut xml, mesh, mids, &name, node_set_of(mesh, &name)?);
     }
     for (r, dof) in rigid.iter().zip(DOF_NAMES) {
         if !r.is_empty() {
-            node_set(&mut xml, &format!("rigid_{dof}"), r);
+            node_set_labels(&mut xml, &format!("rigid_{dof}"), r);
         }
     }
-    node_set(&mut xml, sets::INTERFACE_NODES, node_set_of(mesh, sets::INTERFACE_NODES)?);
+    node_set(&mut xml, mesh, mids, sets::INTERFACE_NODES, node_set_of(mesh, sets::INTERFACE_NODES)?);
     for name in [sets::WALL_LUMEN_FACES, sets::WALL_OUTER_FACES] {
-        surface(&mut xml, mesh, name, face_set_of(mesh, name)?);
+        surface(&mut xml, mesh, name, face_set_of(mesh, name)?, mids);
     }
     xml.close("Mesh");
 
@@ -682,6 +733,17 @@ pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
 pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
     let cfg = &options.febio;
     cfg.validate()?;
+    if cfg.element == FebioElement::Hex20 {
+        // FORMATS.md 2b: fluid and solid must share every interface node, and FEBio's fluid-FSI
+        // has only been run (and documented) on hex8; a hex20 wall on a hex8 lumen would leave its
+        // mid-edge interface nodes hanging.
+        return Err(Error::Config(
+            "febio.element = \"hex20\": the fluid-FSI deck (format febio-fsi) is written with hex8 only, since the \
+             lumen and the wall must share every interface node; write febio-fsi with element = \"hex8\" (a separate \
+             run) or leave it out"
+                .into(),
+        ));
+    }
     check_triads(mesh)?;
     let u = MechanicalUnits::of(options.length_unit);
     let f = &cfg.fsi;
@@ -756,33 +818,33 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
         ],
     )?;
     xml.fragment(&blood);
-    wall_materials(&mut xml, mesh, cfg, u, 2)?;
+    wall_materials(&mut xml, mesh, &options.material, u, 2)?;
     xml.close("Material");
 
     xml.open("Mesh", &[]);
     let all: Vec<u32> = (0..mesh.nodes.len() as u32).collect();
-    nodes(&mut xml, mesh, "all_nodes", &all, u);
+    nodes(&mut xml, mesh, "all_nodes", &all, None, u);
     for region in Region::ALL {
-        elements(&mut xml, mesh, region);
+        elements(&mut xml, mesh, region, None);
     }
     let mut lumen_inner_sets = Vec::new();
     for end in &mesh.ends {
         let wall = sets::wall_end(&end.name);
-        node_set(&mut xml, &wall, node_set_of(mesh, &wall)?);
+        node_set(&mut xml, mesh, None, &wall, node_set_of(mesh, &wall)?);
         let inner: Vec<u32> = node_set_of(mesh, &sets::lumen_end(&end.name))?
             .iter()
             .copied()
             .filter(|&n| !on_interface[n as usize])
             .collect();
         let name = format!("{}_inner", sets::lumen_end(&end.name));
-        node_set(&mut xml, &name, &inner);
+        node_set(&mut xml, mesh, None, &name, &inner);
         lumen_inner_sets.push((end.name.clone(), name));
     }
-    node_set(&mut xml, sets::INTERFACE_NODES, interface);
-    surface(&mut xml, mesh, sets::LUMEN_WALL_FACES, face_set_of(mesh, sets::LUMEN_WALL_FACES)?);
+    node_set(&mut xml, mesh, None, sets::INTERFACE_NODES, interface);
+    surface(&mut xml, mesh, sets::LUMEN_WALL_FACES, face_set_of(mesh, sets::LUMEN_WALL_FACES)?, None);
     for end in &mesh.ends {
         let name = sets::lumen_end(&end.name);
-        surface(&mut xml, mesh, &name, face_set_of(mesh, &name)?);
+        surface(&mut xml, mesh, &name, face_set_of(mesh, &name)?, None);
     }
     xml.close("Mesh");
 
@@ -812,13 +874,20 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
     xml.close("Boundary");
 
     xml.open("Loads", &[]);
-    xml.open("surface_load", &[("name", "fsi_traction"), ("surface", sets::LUMEN_WALL_FACES), ("type", "fluid-FSI traction")]);
+    xml.open(
+        "surface_load",
+        &[("name", "fsi_traction"), ("surface", sets::LUMEN_WALL_FACES), ("type", "fluid-FSI traction")],
+    );
     xml.leaf("shell_bottom", &[], "0");
     xml.close("surface_load");
     let inlet_surface = sets::lumen_end(&inlet.name);
     xml.open(
         "surface_load",
-        &[("name", &format!("velocity_{}", inlet.name)), ("surface", &inlet_surface), ("type", "fluid normal velocity")],
+        &[
+            ("name", &format!("velocity_{}", inlet.name)),
+            ("surface", &inlet_surface),
+            ("type", "fluid normal velocity"),
+        ],
     );
     // measured along the facets' outward normal: inflow is negative
     xml.leaf("velocity", &[("lc", "1")], &param(-velocity));
@@ -830,7 +899,11 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
         let surf = sets::lumen_end(&end.name);
         xml.open(
             "surface_load",
-            &[("name", &format!("backflow_{}", end.name)), ("surface", &surf), ("type", "fluid backflow stabilization")],
+            &[
+                ("name", &format!("backflow_{}", end.name)),
+                ("surface", &surf),
+                ("type", "fluid backflow stabilization"),
+            ],
         );
         xml.leaf("beta", &[("lc", "3")], &param(f.backflow_beta));
         xml.close("surface_load");
@@ -953,10 +1026,10 @@ mod tests {
     }
 
     #[test]
-    fn default_constants_are_valid_and_kappa_is_bounded() {
-        let mut c = FebioConfig::default();
-        c.validate().unwrap();
-        c.media.kappa = 0.34;
-        assert!(c.validate().unwrap_err().to_string().contains("kappa"));
+    fn default_config_is_valid_and_element_reads_from_toml() {
+        FebioConfig::default().validate().unwrap();
+        let c: FebioConfig = toml::from_str("element = \"hex20\"").unwrap();
+        assert_eq!(c.element, FebioElement::Hex20);
+        assert!(toml::from_str::<FebioConfig>("element = \"hex27\"").is_err());
     }
 }

@@ -41,7 +41,7 @@
 //! Time: one fluid time step per coupling window, dt = min(1e-4 s, Courant 0.5 of the inflow);
 //! end time `openfoam.end_time` or 100 windows.
 
-use super::inp::{deck_parts, fmt_const, Dialect};
+use super::inp::{deck_parts, fmt_const, Dialect, EndHold};
 use super::openfoam::{inlet_velocities, lumen_polymesh, render, PolyMesh};
 use super::WriteOptions;
 use crate::config::InletProfile;
@@ -195,7 +195,6 @@ fn write_file(dir: &Path, rel: &str, text: &str, executable: bool) -> Result<Pat
     Ok(Path::new("fsi").join(rel))
 }
 
-
 const TEMPLATES: &[(&str, &str)] = &[
     ("precice-config.xml", include_str!("../../templates/fsi/precice-config.xml")),
     ("openfoam/system/preciceDict", include_str!("../../templates/fsi/openfoam/system/preciceDict")),
@@ -229,6 +228,18 @@ fn timing(poly: &PolyMesh, options: &WriteOptions, u_max: f64) -> (f64, f64) {
 /// Writes `fsi/` under `dir` (see the module documentation).
 pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
     options.openfoam.validate()?;
+    let element = options.fe.calculix_element;
+    if element.is_quadratic() {
+        // The map pairs each fluid point with one corner node, and the lumping gives each face's
+        // force to its four corners (1/4 each, right for bilinear faces): a C3D20 face has four
+        // more nodes on the interface, which would get neither force nor displacement.
+        return Err(Error::Config(format!(
+            "fe.calculix_element = {}: the FSI package couples the fluid points to the corner nodes of bilinear faces \
+             only; quadratic elements have mid-edge nodes on the interface that the map cannot serve. Use C3D8I (the \
+             default), C3D8 or C3D8R with the fsi format",
+            element.name()
+        )));
+    }
     let poly = lumen_polymesh(mesh)?;
     let map = interface_map(mesh, &poly)?;
     let fsi = dir.join("fsi");
@@ -319,7 +330,7 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     // The FSI deck: the wall model in SI units + the interface set + the dynamic step.
     let mut si = options.clone();
     si.length_unit = LengthUnit::M;
-    let (model, _) = deck_parts(mesh, &si, Dialect::Calculix)?;
+    let (model, _) = deck_parts(mesh, &si, Dialect::Calculix, EndHold::Equations)?;
     let nset = format!("N{}", SOLID_PATCH.to_ascii_uppercase());
     let mut deck = model;
     deck.push_str(&format!(

@@ -31,8 +31,8 @@
 //!
 //! # Units
 //! Mesh lengths are mm; the deck uses `WriteOptions::length_unit` and the consistent system
-//! below. Material constants in [`FeConfig`] are given in MPa (stress) and tonne/mm^3
-//! (density) and converted:
+//! below. The layer constants are the shared [`WallMaterial`](super::material::WallMaterial)
+//! (kPa, kg/m^3; C10 = c/2, D = 2/K), converted:
 //!
 //! | length | force | stress | mass  | 100 mmHg       |
 //! |--------|-------|--------|-------|----------------|
@@ -140,80 +140,6 @@ impl MaterialModel {
     }
 }
 
-/// Material constants of one layer, in MPa and tonne/mm^3 (converted to the deck's units).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct LayerMaterial {
-    /// Neo-Hookean ground matrix, C10 = c/2 (MPa).
-    pub c10: f64,
-    /// Compressibility D = 2/K (1/MPa): Abaqus `D`, CalculiX `D1`.
-    pub d: f64,
-    /// Fibre stiffness k1 (MPa).
-    pub k1: f64,
-    /// Fibre exponent k2 (dimensionless).
-    pub k2: f64,
-    /// Dispersion kappa in [0, 1/3] (Abaqus only; CalculiX's ELASTIC_FIBER has none).
-    pub kappa: f64,
-    /// Linear-elastic template: Young's modulus (MPa).
-    pub youngs_modulus: f64,
-    /// Linear-elastic template: Poisson's ratio.
-    pub poisson_ratio: f64,
-    /// Density (tonne/mm^3).
-    pub density: f64,
-}
-
-impl LayerMaterial {
-    /// Media (and intima) defaults: the constants of Holzapfel, Gasser, Ogden 2000 (J Elasticity
-    /// 61:1-48, rabbit carotid media: c = 3.0 kPa, k1 = 2.3632 kPa, k2 = 0.8393, also CalculiX's
-    /// ELASTIC_FIBER example) with c and k1 multiplied by 10. The published values describe a
-    /// thick carotid wall (thickness ~0.55 r) with residual stresses; on a stress-free wall of
-    /// 0.2 r they cannot hold 100 mmHg (ccx 2.20 stops with "fiber extension is too large"),
-    /// while the scaled set converges (ccx: the 2 mm tube with a 0.4 mm wall opens by 47 % of
-    /// its radius at 100 mmHg: still a soft, rabbit-like wall; override for your tissue). The intima takes the
-    /// media's values (as the fibre angles do in [`crate::config::WallConfig`]).
-    /// D = 2/K with K = 100 mu (initial Poisson ratio 0.495); kappa = 0 (HGO 2000 has no
-    /// dispersion). Density 1.2e-9 tonne/mm^3 (1200 kg/m^3). The linear-elastic constants
-    /// (E = 1 MPa, nu = 0.45) are round illustrative values, not literature data.
-    pub fn hgo2000_media() -> Self {
-        let c10 = 1.5e-2;
-        LayerMaterial {
-            c10,
-            d: 2.0 / (100.0 * 2.0 * c10),
-            k1: 2.3632e-2,
-            k2: 0.8393,
-            kappa: 0.0,
-            youngs_modulus: 1.0,
-            poisson_ratio: 0.45,
-            density: 1.2e-9,
-        }
-    }
-    /// HGO 2000 adventitia (c = 0.3 kPa, k1 = 0.562 kPa, k2 = 0.7112), c and k1 times 10 as
-    /// for the media.
-    pub fn hgo2000_adventitia() -> Self {
-        let c10 = 1.5e-3;
-        LayerMaterial { c10, d: 2.0 / (100.0 * 2.0 * c10), k1: 5.62e-3, k2: 0.7112, ..Self::hgo2000_media() }
-    }
-    fn check(&self, layer: &str) -> Result<()> {
-        let bad = |key: &str, why: &str| Err(Error::Config(format!("fe.{layer}.{key}: {why}")));
-        let positive = [("c10", self.c10), ("k1", self.k1), ("k2", self.k2), ("youngs_modulus", self.youngs_modulus), ("density", self.density)];
-        for (key, v) in positive {
-            if !(v > 0.0 && v.is_finite()) {
-                return bad(key, "must be positive");
-            }
-        }
-        if !(self.d >= 0.0 && self.d.is_finite()) {
-            return bad("d", "must be zero (incompressible, Abaqus hybrid elements only) or positive");
-        }
-        if !(0.0..=1.0 / 3.0).contains(&self.kappa) {
-            return bad("kappa", "must be between 0 and 1/3");
-        }
-        if !(self.poisson_ratio > -1.0 && self.poisson_ratio < 0.5) {
-            return bad("poisson_ratio", "must be between -1 and 0.5");
-        }
-        Ok(())
-    }
-}
-
 /// Settings of the Abaqus and CalculiX decks (case file section `[fe]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -231,9 +157,6 @@ pub struct FeConfig {
     pub template_dir: Option<PathBuf>,
     /// Lumen pressure of the inflation step, mmHg.
     pub pressure_mmhg: f64,
-    pub intima: LayerMaterial,
-    pub media: LayerMaterial,
-    pub adventitia: LayerMaterial,
 }
 
 impl Default for FeConfig {
@@ -244,19 +167,6 @@ impl Default for FeConfig {
             material: MaterialModel::Hgo,
             template_dir: None,
             pressure_mmhg: 100.0,
-            intima: LayerMaterial::hgo2000_media(),
-            media: LayerMaterial::hgo2000_media(),
-            adventitia: LayerMaterial::hgo2000_adventitia(),
-        }
-    }
-}
-
-impl FeConfig {
-    pub fn layer(&self, region: Region) -> &LayerMaterial {
-        match region {
-            Region::Intima => &self.intima,
-            Region::Media => &self.media,
-            _ => &self.adventitia,
         }
     }
 }
@@ -281,10 +191,8 @@ pub fn fmt_const(x: f64) -> String {
 
 /// Upper case, `[A-Z0-9_]`, starting with a letter, at most [`MAX_NAME`] characters.
 pub fn sanitize_name(name: &str) -> String {
-    let mut s: String = name
-        .chars()
-        .map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_uppercase() } else { '_' })
-        .collect();
+    let mut s: String =
+        name.chars().map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_uppercase() } else { '_' }).collect();
     if !s.starts_with(|c: char| c.is_ascii_alphabetic()) {
         s.insert_str(0, "S_");
     }
@@ -304,10 +212,14 @@ pub fn render(template: &str, source: &str, values: &[(&str, String)]) -> Result
 fn builtin_template(dialect: Dialect, file: &str) -> Option<&'static str> {
     Some(match (dialect, file) {
         (Dialect::Abaqus, "material_hgo.inp") => include_str!("../../templates/abaqus/material_hgo.inp"),
-        (Dialect::Abaqus, "material_linear_elastic.inp") => include_str!("../../templates/abaqus/material_linear_elastic.inp"),
+        (Dialect::Abaqus, "material_linear_elastic.inp") => {
+            include_str!("../../templates/abaqus/material_linear_elastic.inp")
+        }
         (Dialect::Abaqus, "step_inflation.inp") => include_str!("../../templates/abaqus/step_inflation.inp"),
         (Dialect::Calculix, "material_hgo.inp") => include_str!("../../templates/calculix/material_hgo.inp"),
-        (Dialect::Calculix, "material_linear_elastic.inp") => include_str!("../../templates/calculix/material_linear_elastic.inp"),
+        (Dialect::Calculix, "material_linear_elastic.inp") => {
+            include_str!("../../templates/calculix/material_linear_elastic.inp")
+        }
         (Dialect::Calculix, "step_inflation.inp") => include_str!("../../templates/calculix/step_inflation.inp"),
         _ => return None,
     })
@@ -343,17 +255,25 @@ pub fn fibre_local(beta_deg: f64) -> (f64, f64) {
     (x, y)
 }
 
-/// Mid-edge nodes of the wall's quadratic elements.
-struct MidEdges {
-    /// Corner pair of each mid-edge node (index = mid-edge number).
+/// Mid-edge nodes of the wall's quadratic elements (C3D20 here, FEBio `hex20`): one node per
+/// wall edge, shared by the elements around it, numbered in the order in which the wall elements
+/// (ascending) and their edges ([`HEX_EDGES`]) meet them, labelled after every mesh node
+/// ([`MidEdges::label`]) and placed at the edge midpoint. C3D20 and FEBio hex20 list them after
+/// the corners in the same edge order (FORMATS.md 2a; FEBio `FEHex20::shape_fnc`), so one table
+/// serves both, and the decks share their labels.
+pub struct MidEdges {
+    /// Corner pair of each mid-edge node (index = mid-edge number), lower node index first.
     edges: Vec<[u32; 2]>,
     /// Mid-edge numbers of each wall element, in canonical edge order.
     of_element: Vec<[u32; 12]>,
+    /// First wall element.
+    wall_start: usize,
 }
 
 impl MidEdges {
-    fn new(mesh: &VesselMesh) -> Self {
+    pub fn new(mesh: &VesselMesh) -> Self {
         let wall = mesh.wall_range();
+        let wall_start = wall.start;
         let mut index: HashMap<(u32, u32), u32> = HashMap::with_capacity(wall.len() * 3);
         let mut edges = Vec::with_capacity(wall.len() * 3);
         let mut of_element = Vec::with_capacity(wall.len());
@@ -368,12 +288,96 @@ impl MidEdges {
             });
             of_element.push(ids);
         }
-        MidEdges { edges, of_element }
+        MidEdges { edges, of_element, wall_start }
     }
-    /// 1-based label of mid-edge node `m`.
-    fn label(&self, mesh: &VesselMesh, m: u32) -> u64 {
+    /// Number of mid-edge nodes.
+    pub fn len(&self) -> usize {
+        self.edges.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.edges.is_empty()
+    }
+    /// 1-based label of mid-edge node `m`: after every mesh node, so labels stay unique and
+    /// increasing.
+    pub fn label(&self, mesh: &VesselMesh, m: u32) -> u64 {
         mesh.nodes.len() as u64 + 1 + m as u64
     }
+    /// The two corner nodes (0-based mesh indices) of mid-edge node `m`.
+    pub fn corners(&self, m: u32) -> [u32; 2] {
+        self.edges[m as usize]
+    }
+    /// Position of mid-edge node `m` (mesh unit, mm): the midpoint of its edge.
+    pub fn position(&self, mesh: &VesselMesh, m: u32) -> Point3<f64> {
+        let [a, b] = self.edges[m as usize];
+        Point3::from((mesh.nodes[a as usize].coords + mesh.nodes[b as usize].coords) * 0.5)
+    }
+    /// Mid-edge nodes of wall element `e` (mesh element index), in [`HEX_EDGES`] order: the
+    /// nodes 9..20 of C3D20 and FEBio hex20.
+    pub fn of_element(&self, e: usize) -> [u32; 12] {
+        self.of_element[e - self.wall_start]
+    }
+    /// Mid-edge nodes of face `f` of wall element `e`, in the order of the face's edges
+    /// (corner 0-1, 1-2, 2-3, 3-0 of [`crate::mesh::HEX_FACES`]): the nodes 5..8 of a quad8 facet.
+    pub fn of_face(&self, e: usize, f: usize) -> [u32; 4] {
+        let corners = crate::mesh::HEX_FACES[f];
+        let mids = self.of_element(e);
+        std::array::from_fn(|i| {
+            let (a, b) = (corners[i], corners[(i + 1) % 4]);
+            let k = HEX_EDGES
+                .iter()
+                .position(|ed| (ed[0] == a && ed[1] == b) || (ed[0] == b && ed[1] == a))
+                .expect("a face edge is a hex edge");
+            mids[k]
+        })
+    }
+    /// The mid-edge nodes whose two corners are both in `members` (sorted 0-based node
+    /// indices), ascending: the quadratic completion of a node set (a ring, a surface's nodes).
+    pub fn completing(&self, mesh: &VesselMesh, members: &[u32]) -> Vec<u32> {
+        let mut in_set = vec![false; mesh.nodes.len()];
+        for &n in members {
+            in_set[n as usize] = true;
+        }
+        (0..self.edges.len() as u32).filter(|&m| self.edges[m as usize].iter().all(|&n| in_set[n as usize])).collect()
+    }
+}
+
+/// How a deck holds its end rings (both remove the same motions: the displacement along the end's
+/// normal and the circumferential one; the radial expansion stays free).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EndHold {
+    /// A cylindrical `*TRANSFORM` about each end's axis and local dofs 2 (circumferential) and 3
+    /// (axial) fixed: the inflation decks.
+    Transform,
+    /// `*EQUATION`s in global axes, no `*TRANSFORM`: every ring node moves only along its radial
+    /// direction in the end plane, r = (x - c) - ((x - c).n) n normalised (c the end's centre, n
+    /// its outward normal, both from the mesh, so oblique ends of branches work). Per node, with
+    /// f the global dof of the largest |r_f|, two equations u_p - (r_p/r_f) u_f = 0 for the other
+    /// two dofs p (dependent, eliminated). For the FSI deck: the CalculiX adapter writes its
+    /// `*CLOAD` forces in global axes, which ccx would read in local axes on a node under a
+    /// `*TRANSFORM`; a force on an eliminated dof is carried over to the free one.
+    Equations,
+}
+
+/// One end ring of the deck.
+struct EndRing {
+    /// Node set name in the deck.
+    set: String,
+    /// Labels of the ring's nodes (corners and, for quadratic elements, mid-edge nodes).
+    labels: Vec<u64>,
+    /// Centre and outward unit normal (mesh unit).
+    centre: Point3<f64>,
+    normal: nalgebra::Vector3<f64>,
+    /// [`EndHold::Equations`]: per ring node its label and in-plane radial unit direction.
+    radial: Vec<(u64, nalgebra::Vector3<f64>)>,
+}
+
+/// The two equations of an [`EndHold::Equations`] ring node: (dependent dof, free dof, coefficient
+/// of the free dof), dofs 1-based, for u_dependent + coefficient u_free = 0.
+pub fn radial_equations(r: &nalgebra::Vector3<f64>) -> [(usize, usize, f64); 2] {
+    let f = (0..3).max_by(|a, b| r[*a].abs().total_cmp(&r[*b].abs())).unwrap_or(0);
+    let mut others = (0..3).filter(|k| *k != f);
+    let (p, q) = (others.next().unwrap_or(0), others.next().unwrap_or(0));
+    [(p + 1, f + 1, -r[p] / r[f]), (q + 1, f + 1, -r[q] / r[f])]
 }
 
 /// One wall layer of the deck.
@@ -397,8 +401,8 @@ struct Deck<'a> {
     mids: Option<MidEdges>,
     node_sets: Vec<(String, Vec<u64>)>,
     surfaces: Vec<(String, Vec<ElementFace>)>,
-    /// Node set of an end ring and two points on its axis (deck units).
-    ends: Vec<(String, Point3<f64>, Point3<f64>)>,
+    hold: EndHold,
+    ends: Vec<EndRing>,
     layers: Vec<LayerBlock>,
     step: String,
 }
@@ -432,7 +436,7 @@ fn middle_lumen_ring(mesh: &VesselMesh) -> Option<Vec<u32>> {
 }
 
 impl<'a> Deck<'a> {
-    fn new(mesh: &'a VesselMesh, options: &WriteOptions, dialect: Dialect) -> Result<Self> {
+    fn new(mesh: &'a VesselMesh, options: &WriteOptions, dialect: Dialect, hold: EndHold) -> Result<Self> {
         let fe = &options.fe;
         let element = match dialect {
             Dialect::Abaqus => fe.abaqus_element,
@@ -449,7 +453,9 @@ impl<'a> Deck<'a> {
         }
         let wall = mesh.wall_range();
         if wall.is_empty() {
-            return Err(Error::Geometry("the mesh has no wall elements: nothing to write to an Abaqus/CalculiX deck".into()));
+            return Err(Error::Geometry(
+                "the mesh has no wall elements: nothing to write to an Abaqus/CalculiX deck".into(),
+            ));
         }
         let units = MechanicalUnits::of(options.length_unit);
         let scale = options.length_unit.from_mm();
@@ -472,21 +478,10 @@ impl<'a> Deck<'a> {
             raw_sets.push(("lumen_ring".into(), ring));
         }
         let mut node_sets = Vec::with_capacity(raw_sets.len());
-        let mut in_set = vec![false; mesh.nodes.len()];
         for (name, members) in raw_sets {
             let mut labels: Vec<u64> = members.iter().map(|&n| n as u64 + 1).collect();
             if let Some(m) = &mids {
-                for &n in &members {
-                    in_set[n as usize] = true;
-                }
-                for (i, e) in m.edges.iter().enumerate() {
-                    if in_set[e[0] as usize] && in_set[e[1] as usize] {
-                        labels.push(m.label(mesh, i as u32));
-                    }
-                }
-                for &n in &members {
-                    in_set[n as usize] = false;
-                }
+                labels.extend(m.completing(mesh, &members).into_iter().map(|k| m.label(mesh, k)));
             }
             labels.sort_unstable();
             node_sets.push((sanitize_name(&name), labels));
@@ -499,16 +494,34 @@ impl<'a> Deck<'a> {
             .collect();
         let pressure_surface = sanitize_name(sets::WALL_LUMEN_FACES);
         if !surfaces.iter().any(|s| s.0 == pressure_surface) {
-            return Err(Error::Geometry(format!("the mesh has no '{}' face set: no surface to load", sets::WALL_LUMEN_FACES)));
+            return Err(Error::Geometry(format!(
+                "the mesh has no '{}' face set: no surface to load",
+                sets::WALL_LUMEN_FACES
+            )));
         }
         let mut ends = Vec::new();
         for end in &mesh.ends {
             let name = sanitize_name(&sets::wall_end(&end.name));
-            if node_sets.iter().any(|s| s.0 == name) {
-                let a = Point3::from(end.centre.coords * scale);
-                let b = a + end.outward_normal * scale.max(1e-300);
-                ends.push((name, a, b));
+            let Some((_, labels)) = node_sets.iter().find(|s| s.0 == name) else {
+                continue;
+            };
+            let normal = end.outward_normal.normalize();
+            let mut radial = Vec::new();
+            if hold == EndHold::Equations {
+                for &label in labels {
+                    let p = label_position(mesh, mids.as_ref(), label);
+                    let d = p - end.centre;
+                    let r = d - normal * d.dot(&normal);
+                    if !(r.norm() > 1e-9 * d.norm()) || !r.norm().is_finite() {
+                        return Err(Error::Geometry(format!(
+                            "end '{}': ring node {label} lies on the end's axis, so it has no radial direction to move in",
+                            end.name
+                        )));
+                    }
+                    radial.push((label, r.normalize()));
+                }
             }
+            ends.push(EndRing { set: name, labels: labels.clone(), centre: end.centre, normal, radial });
         }
         if ends.is_empty() {
             return Err(Error::Geometry("the mesh has no end rings to hold: the inflation would be ill-posed".into()));
@@ -524,21 +537,28 @@ impl<'a> Deck<'a> {
             }
             let layer_name = sanitize_name(region.name());
             let beta_deg = mesh.layers.iter().find(|l| l.region == region).map(|l| l.fibre_angle_deg).unwrap_or(0.0);
-            let m = fe.layer(region);
+            let m = options.material.layer(region);
             m.check(region.name())?;
+            if dialect == Dialect::Calculix && fe.material == MaterialModel::Hgo && m.kappa != 0.0 {
+                return Err(Error::Config(format!(
+                    "material.{}.kappa = {}: CalculiX's fibre material (ELASTIC_FIBER) has no dispersion, so its deck \
+                     would differ from the Abaqus and FEBio ones; set kappa = 0 or leave out the calculix and fsi formats",
+                    region.name(),
+                    m.kappa
+                )));
+            }
             let material_name = match (dialect, fe.material) {
                 (Dialect::Calculix, MaterialModel::Hgo) => format!("ELASTIC_FIBER_{layer_name}"),
                 (Dialect::Abaqus, MaterialModel::Hgo) => format!("HGO_{layer_name}"),
                 (_, MaterialModel::LinearElastic) => format!("LINEAR_{layer_name}"),
             };
             let (fx, fy) = fibre_local(beta_deg);
-            let s = |mpa: f64| units.stress_from_mpa(mpa);
             let values = [
                 ("LAYER", layer_name.clone()),
                 ("MATERIAL", material_name.clone()),
-                ("C10", fmt_const(s(m.c10))),
-                ("D", fmt_const(1.0 / s(1.0 / m.d))),
-                ("K1", fmt_const(s(m.k1))),
+                ("C10", fmt_const(m.c10(&units))),
+                ("D", fmt_const(m.d(&units))),
+                ("K1", fmt_const(m.k1(&units))),
                 ("K2", fmt_const(m.k2)),
                 ("KAPPA", fmt_const(m.kappa)),
                 ("FIBRE1_X", fmt_const(fx)),
@@ -546,9 +566,9 @@ impl<'a> Deck<'a> {
                 ("FIBRE2_X", fmt_const(fx)),
                 ("FIBRE2_Y", fmt_const(-fy)),
                 ("BETA_DEG", fmt_const(beta_deg)),
-                ("E", fmt_const(s(m.youngs_modulus))),
+                ("E", fmt_const(m.youngs_modulus(&units))),
                 ("NU", fmt_const(m.poisson_ratio)),
-                ("DENSITY", fmt_const(units.density_from_tonne_mm3(m.density))),
+                ("DENSITY", fmt_const(m.density(&units))),
                 ("UNITS", units.describe()),
             ];
             let material_text = render(&mat_text, &mat_source, &values)?;
@@ -568,7 +588,7 @@ impl<'a> Deck<'a> {
                 ("UNITS", units.describe()),
             ],
         )?;
-        Ok(Deck { mesh, dialect, element, scale, units, nodes, mids, node_sets, surfaces, ends, layers, step })
+        Ok(Deck { mesh, dialect, element, scale, units, nodes, mids, node_sets, surfaces, hold, ends, layers, step })
     }
 
     fn write(&self, w: &mut dyn Write) -> std::io::Result<()> {
@@ -584,17 +604,23 @@ impl<'a> Deck<'a> {
         )?;
         writeln!(w, "** Written by vesselhex {} ({} dialect).", env!("CARGO_PKG_VERSION"), self.dialect.folder())?;
         writeln!(w, "** Units: {}.", self.units.describe())?;
-        writeln!(w, "** Node label = vesselhex node index + 1; element label = element index + 1 (lumen not written).")?;
-        writeln!(w, "** Local axes per element: 1 = circumferential, 2 = longitudinal (inlet to outlet), 3 = radial outward.")?;
+        writeln!(
+            w,
+            "** Node label = vesselhex node index + 1; element label = element index + 1 (lumen not written)."
+        )?;
+        writeln!(
+            w,
+            "** Local axes per element: 1 = circumferential, 2 = longitudinal (inlet to outlet), 3 = radial outward."
+        )?;
         writeln!(w, "*NODE")?;
         for &n in &self.nodes {
             let p = mesh.nodes[n as usize].coords * self.scale;
             writeln!(w, "{}, {}, {}, {}", n as u64 + 1, fmt_coord(p.x), fmt_coord(p.y), fmt_coord(p.z))?;
         }
         if let Some(m) = &self.mids {
-            for (i, e) in m.edges.iter().enumerate() {
-                let p = (mesh.nodes[e[0] as usize].coords + mesh.nodes[e[1] as usize].coords) * (0.5 * self.scale);
-                writeln!(w, "{}, {}, {}, {}", m.label(mesh, i as u32), fmt_coord(p.x), fmt_coord(p.y), fmt_coord(p.z))?;
+            for k in 0..m.len() as u32 {
+                let p = m.position(mesh, k).coords * self.scale;
+                writeln!(w, "{}, {}, {}, {}", m.label(mesh, k), fmt_coord(p.x), fmt_coord(p.y), fmt_coord(p.z))?;
             }
         }
         for layer in &self.layers {
@@ -605,7 +631,7 @@ impl<'a> Deck<'a> {
                 entries.push(e as u64 + 1);
                 entries.extend(mesh.hexes[e].iter().map(|&n| n as u64 + 1));
                 if let Some(m) = &self.mids {
-                    entries.extend(m.of_element[e - wall.start].iter().map(|&k| m.label(mesh, k)));
+                    entries.extend(m.of_element(e).iter().map(|&k| m.label(mesh, k)));
                 }
                 write_data_lines(w, &entries)?;
             }
@@ -622,15 +648,62 @@ impl<'a> Deck<'a> {
                 writeln!(w, "{}, {}", f.element as u64 + 1, abaqus_face_label(f.face as usize))?;
             }
         }
-        writeln!(w, "** End rings: cylindrical systems about the end axes (1 radial, 2 circumferential, 3 axial);")?;
-        writeln!(w, "** circumferential and axial motion fixed, radial expansion free.")?;
-        for (name, a, b) in &self.ends {
-            writeln!(w, "*TRANSFORM, NSET={name}, TYPE=C")?;
-            writeln!(w, "{}, {}, {}, {}, {}, {}", fmt_coord(a.x), fmt_coord(a.y), fmt_coord(a.z), fmt_coord(b.x), fmt_coord(b.y), fmt_coord(b.z))?;
-        }
-        writeln!(w, "*BOUNDARY")?;
-        for (name, _, _) in &self.ends {
-            writeln!(w, "{name}, 2, 3")?;
+        match self.hold {
+            EndHold::Transform => {
+                writeln!(
+                    w,
+                    "** End rings: cylindrical systems about the end axes (1 radial, 2 circumferential, 3 axial);"
+                )?;
+                writeln!(w, "** circumferential and axial motion fixed, radial expansion free.")?;
+                for ring in &self.ends {
+                    let a = ring.centre.coords * self.scale;
+                    let b = a + ring.normal * self.scale.max(1e-300);
+                    writeln!(
+                        w,
+                        "*TRANSFORM, NSET={}, TYPE=C\n{}, {}, {}, {}, {}, {}",
+                        ring.set,
+                        fmt_coord(a.x),
+                        fmt_coord(a.y),
+                        fmt_coord(a.z),
+                        fmt_coord(b.x),
+                        fmt_coord(b.y),
+                        fmt_coord(b.z)
+                    )?;
+                }
+                writeln!(w, "*BOUNDARY")?;
+                for ring in &self.ends {
+                    writeln!(w, "{}, 2, 3", ring.set)?;
+                }
+            }
+            EndHold::Equations => {
+                writeln!(
+                    w,
+                    "** End rings, in global axes (no *TRANSFORM): each ring node moves only along its radial"
+                )?;
+                writeln!(
+                    w,
+                    "** direction r in the end plane (normal and circumferential motion zero). Per node, with f the"
+                )?;
+                writeln!(w, "** dof of the largest |r_f|, u_p - (r_p / r_f) u_f = 0 for the two other dofs p.")?;
+                for ring in &self.ends {
+                    let n = ring.normal;
+                    writeln!(
+                        w,
+                        "** {}: {} nodes, end normal ({}, {}, {})",
+                        ring.set,
+                        ring.labels.len(),
+                        fmt_coord(n.x),
+                        fmt_coord(n.y),
+                        fmt_coord(n.z)
+                    )?;
+                    writeln!(w, "*EQUATION")?;
+                    for (label, r) in &ring.radial {
+                        for (dependent, free, coefficient) in radial_equations(r) {
+                            writeln!(w, "2\n{label}, {dependent}, 1., {label}, {free}, {}", fmt_coord(coefficient))?;
+                        }
+                    }
+                }
+            }
         }
         if self.dialect == Dialect::Abaqus {
             writeln!(w, "*DISTRIBUTION TABLE, NAME=TRIAD_TABLE")?;
@@ -660,7 +733,11 @@ impl<'a> Deck<'a> {
             }
             match self.dialect {
                 Dialect::Abaqus => {
-                    writeln!(w, "*ORIENTATION, NAME=ORI_{}, DEFINITION=COORDINATES, SYSTEM=RECTANGULAR, LOCAL DIRECTIONS=2", layer.name)?;
+                    writeln!(
+                        w,
+                        "*ORIENTATION, NAME=ORI_{}, DEFINITION=COORDINATES, SYSTEM=RECTANGULAR, LOCAL DIRECTIONS=2",
+                        layer.name
+                    )?;
                     writeln!(w, "{dist}")?;
                     writeln!(w, "3, 0.")?;
                     let (x, y) = fibre_local(layer.beta_deg);
@@ -674,17 +751,36 @@ impl<'a> Deck<'a> {
             }
         }
         for layer in &self.layers {
-            writeln!(w, "** {} ({}): fibres at +-{} deg from circumferential", layer.name, layer.region.name(), fmt_const(layer.beta_deg))?;
+            writeln!(
+                w,
+                "** {} ({}): fibres at +-{} deg from circumferential",
+                layer.name,
+                layer.region.name(),
+                fmt_const(layer.beta_deg)
+            )?;
             w.write_all(layer.material_text.as_bytes())?;
         }
         for layer in &self.layers {
-            writeln!(w, "*SOLID SECTION, ELSET={}, MATERIAL={}, ORIENTATION=ORI_{}", layer.name, layer.material_name, layer.name)?;
+            writeln!(
+                w,
+                "*SOLID SECTION, ELSET={}, MATERIAL={}, ORIENTATION=ORI_{}",
+                layer.name, layer.material_name, layer.name
+            )?;
             if self.dialect == Dialect::Abaqus {
                 writeln!(w, ",")?;
             }
         }
         w.write_all(self.step.as_bytes())?;
         Ok(())
+    }
+}
+
+/// Position (mesh unit) of a deck node label: a mesh node or a mid-edge node.
+fn label_position(mesh: &VesselMesh, mids: Option<&MidEdges>, label: u64) -> Point3<f64> {
+    let n = mesh.nodes.len() as u64;
+    match mids {
+        Some(m) if label > n => m.position(mesh, (label - n - 1) as u32),
+        _ => mesh.nodes[(label - 1) as usize],
     }
 }
 
@@ -711,8 +807,13 @@ fn write_data_lines(w: &mut dyn Write, entries: &[u64]) -> std::io::Result<()> {
 
 /// The deck as text in two parts: the model data (everything before the step) and the step
 /// (the rendered `step_inflation.inp`, written last), so another step can follow the same model.
-pub fn deck_parts(mesh: &VesselMesh, options: &WriteOptions, dialect: Dialect) -> Result<(String, String)> {
-    let deck = Deck::new(mesh, options, dialect)?;
+pub fn deck_parts(
+    mesh: &VesselMesh,
+    options: &WriteOptions,
+    dialect: Dialect,
+    hold: EndHold,
+) -> Result<(String, String)> {
+    let deck = Deck::new(mesh, options, dialect, hold)?;
     let mut buf = Vec::new();
     deck.write(&mut buf).map_err(|e| Error::Config(format!("internal: cannot render the deck: {e}")))?;
     let text = String::from_utf8(buf).map_err(|e| Error::Config(format!("internal: deck is not UTF-8: {e}")))?;
@@ -722,7 +823,7 @@ pub fn deck_parts(mesh: &VesselMesh, options: &WriteOptions, dialect: Dialect) -
 
 /// Writes `<dialect>/model.inp` under `dir`.
 pub fn write_inp(mesh: &VesselMesh, options: &WriteOptions, dialect: Dialect, dir: &Path) -> Result<Vec<PathBuf>> {
-    let deck = Deck::new(mesh, options, dialect)?;
+    let deck = Deck::new(mesh, options, dialect, EndHold::Transform)?;
     let sub = PathBuf::from(dialect.folder());
     std::fs::create_dir_all(dir.join(&sub)).map_err(|e| Error::io(dir.join(&sub), "cannot create the folder", e))?;
     let name = sub.join("model.inp");
@@ -846,8 +947,26 @@ mod tests {
             for file in ["material_hgo.inp", "material_linear_elastic.inp", "step_inflation.inp"] {
                 let (text, _) = template(&fe, dialect, file).unwrap();
                 let keys = [
-                    "LAYER", "MATERIAL", "C10", "D", "K1", "K2", "KAPPA", "FIBRE1_X", "FIBRE1_Y", "FIBRE2_X", "FIBRE2_Y",
-                    "BETA_DEG", "E", "NU", "DENSITY", "UNITS", "PRESSURE", "PRESSURE_MMHG", "PRESSURE_SURFACE", "PRINT_NSET",
+                    "LAYER",
+                    "MATERIAL",
+                    "C10",
+                    "D",
+                    "K1",
+                    "K2",
+                    "KAPPA",
+                    "FIBRE1_X",
+                    "FIBRE1_Y",
+                    "FIBRE2_X",
+                    "FIBRE2_Y",
+                    "BETA_DEG",
+                    "E",
+                    "NU",
+                    "DENSITY",
+                    "UNITS",
+                    "PRESSURE",
+                    "PRESSURE_MMHG",
+                    "PRESSURE_SURFACE",
+                    "PRINT_NSET",
                 ];
                 let values: Vec<(&str, String)> = keys.iter().map(|k| (*k, "1".to_string())).collect();
                 render(&text, file, &values).unwrap();

@@ -12,6 +12,7 @@ pub mod calculix;
 pub mod febio;
 pub mod fsi;
 pub mod inp;
+pub mod material;
 pub mod openfoam;
 pub mod template;
 pub mod vtu;
@@ -25,8 +26,10 @@ pub struct WriteOptions {
     pub openfoam: crate::config::OpenFoamConfig,
     /// Materials, loads and controls of the FEBio decks (`[febio]` in the case file).
     pub febio: febio::FebioConfig,
-    /// Elements, materials and step of the Abaqus and CalculiX decks (`[fe]`).
+    /// Elements, material template and step of the Abaqus and CalculiX decks (`[fe]`).
     pub fe: inp::FeConfig,
+    /// Per-layer wall constants shared by every FE deck (`[material]`).
+    pub material: material::WallMaterial,
 }
 
 impl WriteOptions {
@@ -37,6 +40,7 @@ impl WriteOptions {
             openfoam: config.openfoam.clone(),
             febio: config.febio.clone(),
             fe: config.fe.clone(),
+            material: config.material.clone(),
         }
     }
 }
@@ -47,16 +51,28 @@ pub type WriterFn = fn(&VesselMesh, &WriteOptions, &Path) -> Result<Vec<PathBuf>
 /// The format table: name, what it writes, writer.
 pub const WRITERS: &[(&str, &str, WriterFn)] = &[
     ("vtu", "mesh.vtu: VTK XML unstructured grid for ParaView", vtu::write_vtu),
-    ("openfoam", "openfoam/: polyMesh of the lumen (metres) and a laminar blood-flow case with Allrun", openfoam::write_openfoam),
+    (
+        "openfoam",
+        "openfoam/: polyMesh of the lumen (metres) and a laminar blood-flow case with Allrun",
+        openfoam::write_openfoam,
+    ),
     (
         "openfoam-fsi",
         "openfoam-fsi/: lumen and wall in one polyMesh, cellZones per layer, interface faceZone, for splitMeshRegions",
         openfoam::write_openfoam_fsi,
     ),
-    ("febio", "febio/wall.feb: FEBio 4.0 wall, HGO layers with per-element fibre axes, lumen pressure", febio::write_wall),
+    (
+        "febio",
+        "febio/wall.feb: FEBio 4.0 wall, HGO layers with per-element fibre axes, lumen pressure",
+        febio::write_wall,
+    ),
     ("febio-fsi", "febio/fsi.feb: FEBio 4.0 monolithic fluid-FSI model of lumen and wall", febio::write_fsi),
     ("abaqus", "abaqus/model.inp: Abaqus deck of the wall, HGO layers, inflation step", abaqus::write_abaqus),
-    ("calculix", "calculix/model.inp: CalculiX deck of the wall, ELASTIC_FIBER layers, inflation step", calculix::write_calculix),
+    (
+        "calculix",
+        "calculix/model.inp: CalculiX deck of the wall, ELASTIC_FIBER layers, inflation step",
+        calculix::write_calculix,
+    ),
     (
         "fsi",
         "fsi/: exact fluid-solid interface maps and preCICE files for OpenFOAM + CalculiX (implies openfoam, calculix)",
@@ -98,10 +114,7 @@ pub fn write_text_file(dir: &Path, rel: &str, text: &str, executable: bool) -> R
 /// so an interrupted write never leaves a half-written file under the final name.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<()> {
     use crate::error::Error;
-    let tmp = path.with_extension(format!(
-        "{}.partial",
-        path.extension().and_then(|e| e.to_str()).unwrap_or("out")
-    ));
+    let tmp = path.with_extension(format!("{}.partial", path.extension().and_then(|e| e.to_str()).unwrap_or("out")));
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;
         let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
