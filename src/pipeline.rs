@@ -13,7 +13,8 @@ use crate::progress::Progress;
 use crate::centerline::Branch;
 use crate::junction::{analyse_junctions, fold_normal, signed_angle, twist_frames, FoldEnd, JunctionGeometry};
 use crate::projection::{clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
-use crate::report::{lumen_report, wall_report, BranchReport, InputReport, Report};
+use crate::quality::Stats;
+use crate::report::{lumen_report, wall_report, BranchReport, InputReport, JunctionReport, Report};
 use crate::surface::LumenSurface;
 use crate::volume::{build_volume, RadialLevels};
 use crate::writers::{self, WriteOptions};
@@ -28,6 +29,8 @@ pub struct Meshed {
     pub accuracy: SurfaceAccuracy,
     pub template: SectionTemplate,
     pub junctions: Vec<JunctionGeometry>,
+    /// The junction each element belongs to (its branch's transition), if any.
+    pub junction_of: Vec<Option<usize>>,
 }
 
 /// A branch ready for projection: its frames turned to meet its junctions' folds, and what
@@ -237,11 +240,11 @@ pub fn mesh_tree(
     let w = &config.wall;
     let thickness = |r: f64| w.thickness_mm.unwrap_or(w.thickness_ratio * r);
     let names = tree.branches.iter().map(|b| b.name.clone()).collect();
-    let mut mesh = build_volume(&projected, &template, &junctions, &levels, &layers, &thickness, w.growth, names, lumen_surface);
+    let (mut mesh, junction_of) = build_volume(&projected, &template, &junctions, &levels, &layers, &thickness, w.growth, names, lumen_surface);
 
     progress.stage("annotation");
     annotate(&mut mesh);
-    if let Some((e, q)) = mesh.quality.iter().enumerate().find(|(_, q)| std::env::var("VH_DEBUG").is_err() && (q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0)) {
+    if let Some((e, q)) = mesh.quality.iter().enumerate().find(|(_, q)| q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0) {
         let c = crate::mesh::face_centre(&mesh.corners(e), 0);
         return Err(Error::Geometry(format!(
             "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm is inverted (scaled Jacobian {:.3}): the vessel bends \
@@ -260,7 +263,7 @@ pub fn mesh_tree(
     progress.stage("surface accuracy");
     let aligned: Vec<Branch> = plans.into_iter().map(|p| p.branch).collect();
     let accuracy = surface_accuracy(&mesh, lumen_surface, &aligned, &projected)?;
-    Ok(Meshed { mesh, tree, projected, accuracy, template, junctions })
+    Ok(Meshed { mesh, tree, projected, accuracy, template, junctions, junction_of })
 }
 
 /// Everything `vesselhex mesh` was asked.
@@ -383,6 +386,14 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     Ok(report)
 }
 
+fn end_kind(end: &crate::projection::BranchEnd) -> &'static str {
+    match end {
+        crate::projection::BranchEnd::Vessel { closed: true } => "closed",
+        crate::projection::BranchEnd::Vessel { closed: false } => "open",
+        crate::projection::BranchEnd::Fold(_) => "junction",
+    }
+}
+
 fn build_report(
     meshed: &Meshed,
     surface: &TriangleSurface,
@@ -405,8 +416,30 @@ fn build_report(
             meshed_to: p.s_end * scale,
             stations: p.sections.len(),
             circumferential_elements: meshed.template.ring_len(),
-            inlet_end: if p.inlet_closed { "closed" } else { "open" },
-            outlet_end: if p.outlet_closed { "closed" } else { "open" },
+            inlet_end: end_kind(&p.start),
+            outlet_end: end_kind(&p.end),
+            elements: mesh.branch_of.iter().filter(|&&x| x as usize == p.branch).count(),
+            scaled_jacobian: Stats::of(
+                (0..mesh.hexes.len()).filter(|&e| mesh.branch_of[e] as usize == p.branch).map(|e| mesh.quality[e].scaled_jacobian),
+            ),
+        })
+        .collect();
+    let junctions = meshed
+        .junctions
+        .iter()
+        .map(|g| {
+            let elements: Vec<usize> = (0..mesh.hexes.len()).filter(|&e| meshed.junction_of[e] == Some(g.index)).collect();
+            JunctionReport {
+                centre: (g.centre.coords * scale).into(),
+                radius: g.radius * scale,
+                branches: g.slots.iter().map(|s| meshed.tree.branches[s.branch].name.clone()).collect(),
+                spine_axis: g.axis.into(),
+                elements: elements.len(),
+                scaled_jacobian: Stats::of(elements.iter().map(|&e| mesh.quality[e].scaled_jacobian)),
+                lumen_equiangle_skew: Stats::of(
+                    elements.iter().filter(|&&e| !mesh.regions[e].is_wall()).map(|&e| mesh.quality[e].equiangle_skew),
+                ),
+            }
         })
         .collect();
     let normals_outward = meshed.projected.first().is_none_or(|p| p.normals_outward);
@@ -427,6 +460,7 @@ fn build_report(
         wall: wall_report(mesh),
         surface_accuracy: meshed.accuracy.clone(),
         branches,
+        junctions,
         timings_s: timings.iter().cloned().collect(),
         outputs: vec![],
         config: config.clone(),

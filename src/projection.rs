@@ -470,17 +470,10 @@ fn transition(
             .collect();
         let (probe, section) = cast_rays(template, setup.surface, &sample_at(*u, p.centre), p.core, &targets, orient);
         if !probe.valid() {
-            if std::env::var("VH_DEBUG").is_ok() {
-                for k in 0..template.ring_len() {
-                    let c = &guides[k];
-                    let guide = crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, *u);
-                    eprintln!("k {k} origin {:?} guide {:?} dir {:?} hit {:?} p0 {:?} p1 {:?}", section.origins[k], guide, section.dirs[k], section.surface[k], c.0, c.2);
-                }
-            }
             return Err(failure(*u, &probe));
         }
         out.push(ProjectedSection { in_junction: true, ..section });
     }
-    out.push(fold);
+    out.push(ProjectedSection { in_junction: true, ..fold });
     Ok(out)
 }

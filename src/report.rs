@@ -42,8 +42,26 @@ pub struct BranchReport {
     pub meshed_to: f64,
     pub stations: usize,
     pub circumferential_elements: usize,
+    /// "open", "closed" (a vessel end) or "junction".
     pub inlet_end: &'static str,
     pub outlet_end: &'static str,
+    /// Elements of the branch (lumen and wall, its junction transitions included).
+    pub elements: usize,
+    pub scaled_jacobian: Stats,
+}
+
+/// Quality at one junction: the elements of its branches' transitions.
+#[derive(Debug, Clone, Serialize)]
+pub struct JunctionReport {
+    /// Centre and radius (output unit).
+    pub centre: [f64; 3],
+    pub radius: f64,
+    /// Branches counter-clockwise about the spine, the parent first among them.
+    pub branches: Vec<String>,
+    pub spine_axis: [f64; 3],
+    pub elements: usize,
+    pub scaled_jacobian: Stats,
+    pub lumen_equiangle_skew: Stats,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -68,6 +86,7 @@ pub struct Report {
     pub wall: WallReport,
     pub surface_accuracy: SurfaceAccuracy,
     pub branches: Vec<BranchReport>,
+    pub junctions: Vec<JunctionReport>,
     /// Seconds per stage (zeros with `--reproducible`, so the report is byte-identical).
     pub timings_s: IndexMap<String, f64>,
     pub outputs: Vec<String>,

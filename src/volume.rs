@@ -77,7 +77,7 @@ pub fn build_volume(
     wall_growth: WallGrowth,
     branch_names: Vec<String>,
     surface: &LumenSurface,
-) -> VesselMesh {
+) -> (VesselMesh, Vec<Option<usize>>) {
     let n = template.n;
     let m = template.ring_len();
     let r_cells = levels.lumen_cells();
@@ -258,6 +258,19 @@ pub fn build_volume(
     let mut hexes: Vec<Hex> = Vec::new();
     let mut regions = Vec::new();
     let mut branch_of = Vec::new();
+    // The junction each element belongs to (transition intervals), for the report.
+    let mut junction_of: Vec<Option<usize>> = Vec::new();
+    let interval_junction = |pb: &ProjectedBranch, i: usize| -> Option<usize> {
+        if !(pb.sections[i].in_junction || pb.sections[i + 1].in_junction) {
+            return None;
+        }
+        match (pb.start, pb.end) {
+            (BranchEnd::Fold(f), _) if i < pb.sections.len() / 2 => Some(f.junction),
+            (_, BranchEnd::Fold(f)) => Some(f.junction),
+            (BranchEnd::Fold(f), _) => Some(f.junction),
+            _ => None,
+        }
+    };
     let core_quads = template.core_quads();
     for (b, pb) in projected.iter().enumerate() {
         let last = pb.sections.len() - 2;
@@ -283,6 +296,7 @@ pub fn build_volume(
                 }
             }
             branch_of.resize(hexes.len(), b as u32);
+            junction_of.resize(hexes.len(), interval_junction(pb, i));
         }
     }
     regions.resize(hexes.len(), Region::Lumen);
@@ -311,6 +325,7 @@ pub fn build_volume(
                         hexes.push(ring_hex(b, i, r_cells + w, k));
                         regions.push(region);
                         branch_of.push(b as u32);
+                        junction_of.push(interval_junction(pb, i));
                     }
                 }
             }
@@ -349,7 +364,7 @@ pub fn build_volume(
         v.sort_unstable();
     }
 
-    VesselMesh {
+    let mesh = VesselMesh {
         nodes,
         hexes,
         regions,
@@ -362,7 +377,8 @@ pub fn build_volume(
         node_sets,
         face_sets,
         branch_names,
-    }
+    };
+    (mesh, junction_of)
 }
 
 /// Sweeps of the junction node optimisation.
