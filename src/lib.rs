@@ -22,6 +22,7 @@ pub mod quality;
 pub mod report;
 pub mod surface;
 pub mod synthetic;
+pub mod synthetic_branching;
 pub mod testing;
 pub mod units;
 pub mod volume;

@@ -22,7 +22,8 @@ enum Command {
     /// Compute centerlines from the lumen surface: one polyline from the inlet to every outlet,
     /// with MaximumInscribedSphereRadius and CenterlineIds (VMTK-compatible .vtp, in --units).
     Centerlines(CenterlinesArgs),
-    /// Write the synthetic test vessels (STL + CSV centerline) into a folder.
+    /// Write the synthetic test vessels into a folder: the unbranched ones (STL + CSV centerline)
+    /// and the branching ones (STL + VTP centerlines).
     Fixtures {
         /// Folder to write into.
         #[arg(long)]
@@ -209,7 +210,9 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Mesh(args) => mesh(args),
         Command::Centerlines(args) => centerlines(args),
-        Command::Fixtures { output } => vesselhex::synthetic::write_all_fixtures(&output).map(|_| ()),
+        Command::Fixtures { output } => vesselhex::synthetic::write_all_fixtures(&output)
+            .and_then(|_| vesselhex::synthetic_branching::write_all_branching_fixtures(&output))
+            .map(|_| ()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
