@@ -54,6 +54,14 @@ pub struct CenterlineConfig {
     pub trim_inlet: f64,
     /// Extra length cut from the outlet end, relative to the local radius.
     pub trim_outlet: f64,
+    /// Two junctions whose centres are closer than this many radii (of the upstream junction's
+    /// inscribed sphere) are merged into one junction with all their daughters. 1.0 merges the
+    /// aortic arch's first two supra-aortic branches (about 0.55 R apart) and keeps the third
+    /// (about 2.4 R further) apart; 0 never merges.
+    pub junction_merge_radii: f64,
+    /// The inlet of a branching tree, millimetres: the vessel end nearest this point. Without
+    /// it: the first point of a single polyline, or the end of largest radius of a tree.
+    pub inlet_mm: Option<[f64; 3]>,
 }
 
 impl Default for CenterlineConfig {
@@ -64,6 +72,8 @@ impl Default for CenterlineConfig {
             radius_smoothing_passes: 200,
             trim_inlet: 0.0,
             trim_outlet: 0.0,
+            junction_merge_radii: 1.0,
+            inlet_mm: None,
         }
     }
 }
@@ -430,6 +440,12 @@ impl MeshConfig {
         }
         if c.trim_inlet < 0.0 || c.trim_outlet < 0.0 {
             return bad("centerline.trim_inlet/trim_outlet", "must not be negative");
+        }
+        if !(0.0..=10.0).contains(&c.junction_merge_radii) {
+            return bad("centerline.junction_merge_radii", "must be between 0 and 10 (relative to the radius)");
+        }
+        if c.inlet_mm.is_some_and(|p| !p.iter().all(|x| x.is_finite())) {
+            return bad("centerline.inlet_mm", "must be a point [x, y, z] of finite numbers (mm)");
         }
         self.febio.validate()?;
         self.material.validate()?;

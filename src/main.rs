@@ -37,7 +37,8 @@ adventitia) grown from the lumen surface along its normal (or along the rays), w
 
 Parameters come from the preset, then the case file (--config, TOML), then these flags. Case-file keys (see README):
   preset, units, output_units, formats
-  [centerline] resample_step, smoothing_passes, radius_smoothing_passes, trim_inlet, trim_outlet
+  [centerline] resample_step, smoothing_passes, radius_smoothing_passes, trim_inlet, trim_outlet,
+               junction_merge_radii, inlet_mm
   [lumen] core_elements, core_size, radial_elements, growth_ratio, first_cell_height, axial_spacing,
           axial_spacing_mm, ray_reach
   [wall] thickness_ratio, thickness_mm, growth; [wall.intima] / [wall.media] / [wall.adventitia]:
@@ -109,6 +110,11 @@ struct CenterlinesArgs {
     /// Output file (.vtp).
     #[arg(long)]
     output: PathBuf,
+    /// Also write the branch-split variant (.vtp, VMTK's vmtkbranchextractor layout): one tract
+    /// per branch and junction region of each path, with CenterlineIds, TractIds, Blanking and
+    /// GroupIds.
+    #[arg(long, value_name = "FILE")]
+    branch_split: Option<PathBuf>,
     /// No messages.
     #[arg(long)]
     quiet: bool,
@@ -135,6 +141,10 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
     let surface = vesselhex::input::read_surface(&args.surface, units)?;
     let extraction = extract_centerlines(&surface, &ExtractOptions { inlet, ends })?;
     write_vtp(&extraction.centerlines, units.from_mm(), &args.output)?;
+    let split_tree = match &args.branch_split {
+        Some(path) => Some((vesselhex::centerline_extract::write_branch_split(&extraction, units.from_mm(), path)?, path)),
+        None => None,
+    };
     if !args.quiet {
         for note in &extraction.notes {
             eprintln!("vesselhex: note: {note}");
@@ -152,6 +162,14 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
             );
         }
         eprintln!("vesselhex: {} centerlines written to {}", extraction.centerlines.polylines.len(), args.output.display());
+        if let Some((tree, path)) = split_tree {
+            eprintln!(
+                "vesselhex: {} branches and {} junctions written as tracts to {}",
+                tree.branches.len(),
+                tree.junctions.len(),
+                path.display()
+            );
+        }
     }
     Ok(())
 }

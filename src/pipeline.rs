@@ -111,11 +111,10 @@ const UNIT_MISMATCH_FACTOR: f64 = 8.0;
 /// Checks that the centerline radius matches the distance from the centerline to the surface;
 /// a factor of 10, 100 or 1000 means the two files are in different units.
 fn check_units(surface: &LumenSurface, tree: &CenterlineTree, centerline_source: &Path) -> Result<()> {
-    let samples = &tree.branches[0].samples;
-    let step = (samples.len() / 50).max(1);
-    let mut ratios: Vec<f64> = samples
+    let mut ratios: Vec<f64> = tree
+        .branches
         .iter()
-        .step_by(step)
+        .flat_map(|b| b.samples.iter().step_by((b.samples.len() / 50).max(1)))
         .map(|s| surface.closest(&s.point).distance / s.radius)
         .collect();
     ratios.sort_by(f64::total_cmp);
@@ -142,12 +141,22 @@ const INSIDE_WINDING: f64 = 0.5;
 
 /// Checks that the centerline runs inside the lumen and finds which way the surface's triangles
 /// face (true: out of the lumen), from winding numbers at points along the centerline. The
-/// first and last tenth are left out: near an open end the winding number drops towards 1/2.
+/// first and last tenth of each branch and a radius next to an open end are left out: near an
+/// open end the winding number drops towards 1/2 (measured on the gmsh arch: 0.25 at the end
+/// point, 0.5 about 0.7 radius inside).
 fn check_inside(surface: &LumenSurface, tree: &CenterlineTree, centerline_source: &Path) -> Result<bool> {
-    let samples = &tree.branches[0].samples;
-    let n = samples.len();
-    let probes: Vec<&crate::centerline::CenterlineSample> =
-        (0..=20).map(|i| &samples[(n - 1) * (2 + i * 16 / 20) / 20]).collect();
+    // Also at least a radius from an open end (a short wide branch's tenth is not enough).
+    let tenths = tree
+        .branches
+        .iter()
+        .flat_map(|b| (0..=20).map(move |i| (b, &b.samples[(b.samples.len() - 1) * (2 + i * 16 / 20) / 20])));
+    let away = |(b, s): &(&crate::centerline::Branch, &crate::centerline::CenterlineSample)| {
+        (b.start_junction.is_some() || s.s > s.radius) && (b.end_junction.is_some() || b.length() - s.s > s.radius)
+    };
+    let mut probes: Vec<&crate::centerline::CenterlineSample> = tenths.clone().filter(away).map(|(_, s)| s).collect();
+    if probes.is_empty() {
+        probes = tenths.map(|(_, s)| s).collect();
+    }
     let w: Vec<f64> = probes.par_iter().map(|s| surface.winding_number(&s.point)).collect();
     let total: f64 = w.iter().sum();
     if let Some((k, wk)) = w.iter().enumerate().find(|(_, x)| x.abs() < INSIDE_WINDING) {
@@ -180,7 +189,7 @@ pub fn mesh_vessel(
     progress.stage("surface index");
     let lumen_surface = LumenSurface::new(surface)?;
     progress.stage("centerline");
-    let tree = CenterlineTree::build(centerlines, &config.centerline)?;
+    let tree = CenterlineTree::build(centerlines, &config.centerline, Some(&lumen_surface))?;
     mesh_tree(surface, &lumen_surface, tree, &centerlines.source, config, progress)
 }
 

@@ -293,3 +293,61 @@ fn a_100k_triangle_surface_gives_one_path() {
     let ex = extract_centerlines(&surface, &ExtractOptions::default()).unwrap();
     assert_eq!(ex.centerlines.polylines.len(), 1);
 }
+
+/// `vesselhex centerlines --branch-split`: the tracts of the aortoiliac read back into the same
+/// tree as the paths written next to them (in metres, to exercise the unit).
+#[test]
+fn cli_writes_the_branch_split_variant() {
+    let Some(vessels) = vessels_dir() else { return };
+    let surface = vessels.join("vmtk_aortoiliac/aorta-surface-open-ends.stl");
+    let scaled = temp_dir("cl-split");
+    // The surface in metres: the same file read with --units mm, written back scaled.
+    let s = read_surface(&surface, LengthUnit::Mm).unwrap();
+    let stl = scaled.join("aorta-m.stl");
+    let mut text = String::from("solid aorta\n");
+    for t in &s.triangles {
+        text.push_str(" facet normal 0 0 0\n  outer loop\n");
+        for &v in t {
+            let p = s.vertices[v as usize] * 1e-3;
+            text.push_str(&format!("   vertex {:e} {:e} {:e}\n", p.x, p.y, p.z));
+        }
+        text.push_str("  endloop\n endfacet\n");
+    }
+    text.push_str("endsolid aorta\n");
+    std::fs::write(&stl, text).unwrap();
+    let (paths, split) = (scaled.join("cl.vtp"), scaled.join("cl-split.vtp"));
+    let o = vesselhex(&[
+        "centerlines",
+        "--surface",
+        path_str(&stl),
+        "--units",
+        "m",
+        "--output",
+        path_str(&paths),
+        "--branch-split",
+        path_str(&split),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("3 branches and 1 junctions"), "{err}");
+    let config = vesselhex::config::CenterlineConfig::default();
+    let build = |p: &Path| {
+        let c = read_centerlines(p, LengthUnit::M).unwrap();
+        vesselhex::centerline::CenterlineTree::build(&c, &config, None).unwrap()
+    };
+    let (a, b) = (build(&paths), build(&split));
+    let tracts = read_centerlines(&split, LengthUnit::M).unwrap();
+    assert_eq!(tracts.polylines.len(), 6, "2 paths x (aorta, bifurcation, iliac)");
+    for key in ["CenterlineIds", "TractIds", "Blanking", "GroupIds"] {
+        assert!(tracts.polylines.iter().all(|l| l.cell_tags.contains_key(key)), "{key} missing");
+    }
+    let groups = |blanking: i64| -> std::collections::BTreeSet<i64> {
+        tracts.polylines.iter().filter(|l| l.cell_tags["Blanking"] == blanking).map(|l| l.cell_tags["GroupIds"]).collect()
+    };
+    assert_eq!((groups(0).len(), groups(1).len()), (3, 1), "aorta and two iliacs; one bifurcation");
+    assert!(tracts.polylines.iter().all(|l| l.normals.is_some()), "ParallelTransportNormals written");
+    assert_eq!((b.branches.len(), b.junctions.len()), (a.branches.len(), a.junctions.len()));
+    let gap = (a.junctions[0].centre - b.junctions[0].centre).norm() / a.junctions[0].radius;
+    println!("aortoiliac via the CLI in metres: branch-split junction {gap:.4} r from the paths' one");
+    assert!(gap < 0.1, "{gap}");
+}

@@ -46,11 +46,13 @@
 
 mod ends;
 mod medial;
+mod split;
 mod topology;
 mod vtp;
 
 pub use ends::{EndKind, InletChoice, VesselEnd};
-pub use vtp::write_vtp;
+pub use split::branch_split;
+pub use vtp::{write_branch_split, write_vtp};
 
 use crate::error::{Error, Result};
 use crate::input::{CenterlinePolyline, Centerlines, TriangleSurface};

@@ -1,6 +1,6 @@
 //! Writing centerlines as VMTK-compatible ASCII VTK XML polydata: one line cell per polyline,
-//! point data `MaximumInscribedSphereRadius`, every integer cell tag (`CenterlineIds`) as cell
-//! data.
+//! point data `MaximumInscribedSphereRadius` (and `ParallelTransportNormals` when every polyline
+//! has normals), every integer cell tag (`CenterlineIds`, `GroupIds`...) as cell data.
 
 use crate::error::Result;
 use crate::input::Centerlines;
@@ -35,7 +35,18 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
                 writeln!(w, "          {:e}", r * scale)?;
             }
         }
-        writeln!(w, "        </DataArray>\n      </PointData>\n      <CellData>")?;
+        writeln!(w, "        </DataArray>")?;
+        if lines.iter().all(|l| l.normals.is_some()) {
+            writeln!(
+                w,
+                r#"        <DataArray type="Float64" Name="ParallelTransportNormals" NumberOfComponents="3" format="ascii">"#
+            )?;
+            for n in lines.iter().flat_map(|l| l.normals.iter().flatten()) {
+                writeln!(w, "          {:e} {:e} {:e}", n.x, n.y, n.z)?;
+            }
+            writeln!(w, "        </DataArray>")?;
+        }
+        writeln!(w, "      </PointData>\n      <CellData>")?;
         for key in &keys {
             let values: Vec<String> = lines
                 .iter()
@@ -76,4 +87,22 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
         )?;
         writeln!(w, "      </Lines>\n    </Piece>\n  </PolyData>\n</VTKFile>")
     })
+}
+
+/// Builds the centerline tree of `extraction` (its inlet is the paths' common start) and writes
+/// the tree's branch-split variant ([`super::branch_split`]) to `path`, lengths multiplied by
+/// `scale`. Returns the tree.
+pub fn write_branch_split(
+    extraction: &super::Extraction,
+    scale: f64,
+    path: &Path,
+) -> Result<crate::centerline::CenterlineTree> {
+    let start = extraction.centerlines.polylines.first().map(|l| l.points[0]);
+    let config = crate::config::CenterlineConfig {
+        inlet_mm: start.map(|p| p.coords.into()),
+        ..Default::default()
+    };
+    let tree = crate::centerline::CenterlineTree::build(&extraction.centerlines, &config, None)?;
+    write_vtp(&super::branch_split(&tree, path), scale, path)?;
+    Ok(tree)
 }
