@@ -255,6 +255,21 @@ pub fn mesh_tree(
     annotate(&mut mesh);
     if let Some((e, q)) = mesh.quality.iter().enumerate().find(|(_, q)| q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0) {
         let c = crate::mesh::face_centre(&mesh.corners(e), 0);
+        if let Some(j) = junction_of[e] {
+            return Err(Error::Geometry(format!(
+                "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm, in {}, is inverted (scaled Jacobian {:.3}): the \
+                 junction's transition folds there (a narrow crotch or a small branch on a large vessel); reduce \
+                 wall.thickness_ratio or mesh finer",
+                surface.source.display(),
+                e + 1,
+                mesh.regions[e].name(),
+                c.x,
+                c.y,
+                c.z,
+                junctions[j].describe(&tree),
+                q.scaled_jacobian
+            )));
+        }
         return Err(Error::Geometry(format!(
             "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm is inverted (scaled Jacobian {:.3}): the vessel bends \
              too sharply for the cross-sections, or the wall is too thick there. Increase \
