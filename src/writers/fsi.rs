@@ -35,7 +35,16 @@
 //! * `calculix/fsi.inp`: the wall model of `calculix/model.inp` **in SI units** (metres, like the
 //!   fluid, since preCICE does not convert), the node set `NLUMEN_WALL` (the interface nodes, the
 //!   adapter's `N<patch>`), a `*DYNAMIC` step with zero `*CLOAD` on it; `calculix/config.yml` for
-//!   the CalculiX adapter (patch `lumen_wall`). The inflation deck is not changed.
+//!   the CalculiX adapter (patch `lumen_wall`). The inflation deck is not changed. The end rings
+//!   are held by `*EQUATION`s in global axes ([`EndHold::Equations`]: each ring node moves only
+//!   along its radial direction in its end plane, oblique ends included), not by the inflation
+//!   deck's cylindrical `*TRANSFORM`: the end rings hold interface nodes, and ccx would read the
+//!   adapter's global-axis forces on a transformed node in its local axes.
+//!
+//! Only bilinear CalculiX elements (C3D8I, C3D8, C3D8R) are accepted: the map pairs fluid points
+//! with corner nodes and lumps each face's force on its four corners, so a C3D20 wall would leave
+//! its interface mid-edge nodes without force or displacement; `fe.calculix_element = C3D20*` is
+//! refused with that reason.
 //! * `Allrun`, `README.md`.
 //!
 //! Time: one fluid time step per coupling window, dt = min(1e-4 s, Courant 0.5 of the inflow);
