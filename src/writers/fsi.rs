@@ -51,7 +51,7 @@
 //! end time `openfoam.end_time` or 100 windows.
 
 use super::inp::{deck_parts, fmt_const, Dialect, EndHold};
-use super::openfoam::{inlet_velocities, lumen_polymesh, render, PolyMesh};
+use super::openfoam::{end_vars, inlet_velocities, lumen_polymesh, render, EndNames, PolyMesh};
 use super::WriteOptions;
 use crate::config::InletProfile;
 use crate::error::{Error, Result};
@@ -218,6 +218,11 @@ const TEMPLATES: &[(&str, &str)] = &[
     ("README.md", include_str!("../../templates/fsi/README.md")),
 ];
 const STEP_TEMPLATE: &str = include_str!("../../templates/fsi/calculix/step_fsi.inp");
+/// The `pointDisplacement` entry of one end patch (inlet or outlet), `{{end}}` = its name.
+const END_PIECE: (&str, &str) = (
+    "templates/fsi/openfoam/0/pointDisplacement.end",
+    include_str!("../../templates/fsi/openfoam/0/pointDisplacement.end"),
+);
 
 /// Coupling time window and end time, s.
 fn timing(poly: &PolyMesh, options: &WriteOptions, u_max: f64) -> (f64, f64) {
@@ -283,7 +288,10 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     out.push(write_file(&fsi, "force_lumping.csv", &lumping, false)?);
 
     // Case values.
-    let inlet = poly.patch("inlet").ok_or_else(|| Error::Geometry("FSI writer: no inlet patch".into()))?;
+    let ends = EndNames::of(mesh)?;
+    let inlet = poly
+        .patch(&ends.inlet)
+        .ok_or_else(|| Error::Geometry(format!("FSI writer: no inlet patch '{}'", ends.inlet)))?;
     let inflow = inlet_velocities(&poly, inlet, &options.openfoam);
     let u_max = inflow.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
     let (dt, end) = timing(&poly, options, u_max);
@@ -293,11 +301,12 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     }
     u.push(')');
     let mut end_patches = String::new();
-    for p in poly.patches.iter().filter(|p| p.name != FLUID_PATCH) {
-        end_patches.push_str(&format!("    {}\n    {{\n        type            slip;\n    }}\n", p.name));
+    for end in ends.all() {
+        end_patches.push_str(&render(END_PIECE.0, END_PIECE.1, &[("end", end.to_string())])?);
     }
     let windows = (end / dt).round().max(1.0) as u64;
-    let vars: Vec<(&str, String)> = vec![
+    let mut vars: Vec<(&str, String)> = end_vars(&ends)?;
+    vars.extend([
         ("version", env!("CARGO_PKG_VERSION").to_string()),
         ("fluid", FLUID.into()),
         ("solid", SOLID.into()),
@@ -330,7 +339,7 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
         ("unit", unit.name().into()),
         ("n_nodes", map.nodes.len().to_string()),
         ("n_faces", map.faces.len().to_string()),
-    ];
+    ]);
     for (rel, template) in TEMPLATES {
         let text = render(&format!("templates/fsi/{rel}"), template, &vars)?;
         out.push(write_file(&fsi, rel, &text, *rel == "Allrun")?);
