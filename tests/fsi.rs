@@ -794,3 +794,53 @@ fn quadratic_calculix_elements_are_refused_by_the_fsi_package() {
     assert!(!dir.join("fsi/interface_nodes.csv").exists(), "a refused package left files");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Several outlets
+
+/// The names of the entries of an OpenFOAM field file's `boundaryField` (one level deep).
+fn boundary_field_entries(text: &str) -> Vec<String> {
+    let body = &text[text.find("boundaryField").unwrap()..];
+    let (mut names, mut depth, mut word) = (vec![], 0, String::new());
+    for line in body.lines().map(|l| l.split("//").next().unwrap().trim()) {
+        match line {
+            "{" => {
+                depth += 1;
+                if depth == 2 {
+                    names.push(word.clone());
+                }
+            }
+            "}" => depth -= 1,
+            w if depth == 1 && !w.is_empty() => word = w.to_string(),
+            _ => {}
+        }
+    }
+    names
+}
+
+/// The FSI package of a mesh with an inlet and five outlets (three disjoint tubes, two oblique):
+/// the maps read back exactly, the end rings of all six ends are held by their own equations, and
+/// the fluid overlay has an entry for every end patch.
+#[test]
+fn fsi_package_of_a_multi_outlet_mesh() {
+    let mut c = MeshConfig::default();
+    c.lumen.core_elements = 2;
+    c.lumen.radial_elements = 2;
+    c.lumen.axial_spacing_mm = Some(3.0);
+    c.wall.thickness_mm = Some(0.6);
+    let mesh = vesselhex::testing::multi_outlet_mesh(&c).unwrap();
+    assert_eq!(mesh.ends.len(), 6);
+    check_map(&mesh, LengthUnit::Mm, "multi");
+    check_end_equations(&mesh, "ends-multi");
+    let (dir, _) = write_all(&mesh, LengthUnit::Mm, "multi-overlay");
+    let ends: Vec<String> = mesh.ends.iter().map(|e| e.name.clone()).collect();
+    let u = boundary_field_entries(&std::fs::read_to_string(dir.join("fsi/openfoam/0/U")).unwrap());
+    let mut want = ends.clone();
+    want.push("wall".into());
+    assert_eq!(u, want, "fsi/openfoam/0/U");
+    let d = boundary_field_entries(&std::fs::read_to_string(dir.join("fsi/openfoam/0/pointDisplacement")).unwrap());
+    let mut want = vec!["wall".to_string()];
+    want.extend(ends.iter().cloned());
+    assert_eq!(d, want, "fsi/openfoam/0/pointDisplacement");
+    let _ = std::fs::remove_dir_all(&dir);
+}
