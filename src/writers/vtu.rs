@@ -72,3 +72,42 @@ pub fn write_vtu(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     write_atomic(&path, |w| w.write_all(&buffer))?;
     Ok(vec![name])
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::MeshConfig;
+    use vtkio::model::DataSet;
+
+    /// The cell arrays read back with vtkio: `branch` is each element's branch on a mesh with
+    /// three branches, `region` its region.
+    #[test]
+    fn branch_and_region_arrays_read_back() {
+        let mut c = MeshConfig::default();
+        c.lumen.core_elements = 2;
+        c.lumen.radial_elements = 2;
+        c.lumen.axial_spacing_mm = Some(3.0);
+        let mesh = crate::testing::multi_outlet_mesh(&c).unwrap();
+        let dir = std::env::temp_dir().join(format!("vesselhex-vtu-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        write_vtu(&mesh, &WriteOptions::default(), &dir).unwrap();
+        let vtk = Vtk::import(dir.join("mesh.vtu")).unwrap();
+        let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else { panic!("not an unstructured grid") };
+        let piece = pieces[0].load_piece_data(None).unwrap();
+        let array = |name: &str| -> Vec<i32> {
+            let a = piece.data.cell.iter().find_map(|a| match a {
+                Attribute::DataArray(d) if d.name == name => Some(d.data.clone()),
+                _ => None,
+            });
+            match a {
+                Some(IOBuffer::I32(v)) => v,
+                other => panic!("{name}: {other:?}"),
+            }
+        };
+        let branch = array("branch");
+        assert_eq!(branch, mesh.branch_of.iter().map(|&b| b as i32).collect::<Vec<_>>());
+        assert_eq!(branch.iter().max(), Some(&2));
+        assert_eq!(array("region"), mesh.regions.iter().map(|r| r.code()).collect::<Vec<_>>());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
