@@ -1109,6 +1109,10 @@ fn hex20_is_refused_by_the_fsi_deck_with_the_key() {
     std::fs::write(&case, "[febio]\nelement = \"hex20\"\n").unwrap();
     let c = MeshConfig::from_case_file(&case, None).unwrap();
     assert_eq!(c.febio.element, vesselhex::writers::febio::FebioElement::Hex20);
+    // with febio-fsi requested, before any meshing
+    std::fs::write(&case, "formats = [\"febio\", \"febio-fsi\"]\n[febio]\nelement = \"hex20\"\n").unwrap();
+    let e = MeshConfig::from_case_file(&case, None).unwrap_err().to_string();
+    assert!(e.contains("febio.element") && e.contains("febio-fsi"), "{e}");
     std::fs::write(&case, "[febio]\nelement = \"hex27\"\n").unwrap();
     let e = MeshConfig::from_case_file(&case, None).unwrap_err().to_string();
     assert!(e.contains("hex27") && e.contains("case.toml"), "{e}");

@@ -792,6 +792,14 @@ fn quadratic_calculix_elements_are_refused_by_the_fsi_package() {
         assert!(e.contains("fe.calculix_element") && e.contains(element.name()) && e.contains("C3D8I"), "{e}");
     }
     assert!(!dir.join("fsi/interface_nodes.csv").exists(), "a refused package left files");
+    // and before any meshing when the fsi format is asked for
+    let mut config = MeshConfig::default();
+    config.formats = vec!["fsi".into()];
+    config.fe.calculix_element = ElementType::C3D20;
+    let e = config.validate().unwrap_err().to_string();
+    assert!(e.contains("fe.calculix_element") && e.contains("fsi"), "{e}");
+    config.formats = vec!["calculix".into()];
+    config.validate().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
 
