@@ -768,7 +768,7 @@ fn ccx_carries_a_force_on_an_eliminated_dof_over() {
         let log = String::from_utf8_lossy(&out.stdout).to_string();
         assert!(out.status.success() && log.contains("Job finished") && !log.contains("*WARNING"), "{log}");
         let dat = std::fs::read_to_string(dir.join(format!("{job}.dat"))).unwrap();
-        let line = dat.lines().filter(|l| l.split_whitespace().next() == Some("7")).last().unwrap().to_string();
+        let line = dat.lines().rfind(|l| l.split_whitespace().next() == Some("7")).unwrap().to_string();
         let u: Vec<f64> = line.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect();
         moved.push(u);
     }
@@ -793,8 +793,7 @@ fn quadratic_calculix_elements_are_refused_by_the_fsi_package() {
     }
     assert!(!dir.join("fsi/interface_nodes.csv").exists(), "a refused package left files");
     // and before any meshing when the fsi format is asked for
-    let mut config = MeshConfig::default();
-    config.formats = vec!["fsi".into()];
+    let mut config = MeshConfig { formats: vec!["fsi".into()], ..Default::default() };
     config.fe.calculix_element = ElementType::C3D20;
     let e = config.validate().unwrap_err().to_string();
     assert!(e.contains("fe.calculix_element") && e.contains("fsi"), "{e}");

@@ -516,7 +516,8 @@ impl<'a> Deck<'a> {
                     let p = label_position(mesh, mids.as_ref(), label);
                     let d = p - end.centre;
                     let r = d - normal * d.dot(&normal);
-                    if !(r.norm() > 1e-9 * d.norm()) || !r.norm().is_finite() {
+                    let on_axis = r.norm() <= 1e-9 * d.norm();
+                    if on_axis || !r.norm().is_finite() {
                         return Err(Error::Geometry(format!(
                             "end '{}': ring node {label} lies on the end's axis, so it has no radial direction to move in",
                             end.name
