@@ -449,6 +449,7 @@ impl MeshConfig {
         }
         self.febio.validate()?;
         self.material.validate()?;
+        crate::writers::check_format_settings(self)?;
         Ok(())
     }
 }

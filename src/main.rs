@@ -44,8 +44,9 @@ Parameters come from the preset, then the case file (--config, TOML), then these
   [wall] thickness_ratio, thickness_mm, growth; [wall.intima] / [wall.media] / [wall.adventitia]:
           fraction, elements, fibre_angle_deg
   [openfoam] mean_velocity, flow_rate_ml_s, profile, solver, nu, iterations, end_time, binary
-  [fe] abaqus_element, calculix_element, material, template_dir, pressure_mmhg, [fe.<layer>]
-  [febio] lumen_pressure_mmhg, static_steps, [febio.<layer>], [febio.blood], [febio.fsi]
+  [fe] abaqus_element, calculix_element, material, template_dir, pressure_mmhg
+  [febio] element, lumen_pressure_mmhg, static_steps, [febio.blood], [febio.fsi]
+  [material.<layer>] c_kpa, k1_kpa, k2, kappa, bulk_kpa, density_kg_m3, youngs_modulus_kpa, poisson_ratio
 
 Formats (--formats): vtu, calculix, abaqus, febio, febio-fsi, openfoam, openfoam-fsi, fsi (implies openfoam and calculix).
 Outputs in --output: the formats' files and report.json (counts, quality, surface accuracy, timings).";

@@ -4,10 +4,11 @@
 use crate::config::MeshConfig;
 use crate::error::Result;
 use crate::input::{CenterlinePolyline, Centerlines, TriangleSurface};
+use crate::mesh::{sets, ElementFace, Region, Triad, VesselEnd, VesselMesh};
 use crate::pipeline::{mesh_vessel, Meshed};
 use crate::progress::Progress;
 use indexmap::IndexMap;
-use nalgebra::Point3;
+use nalgebra::{Point3, Rotation3, Vector3};
 
 /// An open straight tube along +z: `around` points per ring, `rings` + 1 rings, outward normals.
 pub fn straight_tube_surface(radius: f64, length: f64, around: usize, rings: usize) -> TriangleSurface {
@@ -61,7 +62,8 @@ pub fn fixture_inputs(name: &str) -> Option<(TriangleSurface, Centerlines)> {
     let v = fixture_by_name(name)?;
     let res = v.resolution();
     let (vertices, triangles) = triangulate(v.as_ref(), res.circumferential, res.axial_step_mm);
-    let surface = TriangleSurface { vertices, triangles, triangle_tags: None, source: format!("{name} (in memory)").into() };
+    let surface =
+        TriangleSurface { vertices, triangles, triangle_tags: None, source: format!("{name} (in memory)").into() };
     let s = centerline_abscissae(v.as_ref());
     let centerlines = Centerlines {
         polylines: vec![CenterlinePolyline {
@@ -73,4 +75,192 @@ pub fn fixture_inputs(name: &str) -> Option<(TriangleSurface, Centerlines)> {
         source: format!("{name} centerline (in memory)").into(),
     };
     Some((surface, centerlines))
+}
+
+/// A rigid motion of a meshed vessel: `rotation` about the origin, then `shift` (mm). Nodes, end
+/// centres and normals, triads and fibres move with it; quality figures do not change.
+pub fn moved(mut mesh: VesselMesh, rotation: Rotation3<f64>, shift: Vector3<f64>) -> VesselMesh {
+    for p in &mut mesh.nodes {
+        *p = rotation * *p + shift;
+    }
+    for t in &mut mesh.triads {
+        *t = Triad { e_circ: rotation * t.e_circ, e_long: rotation * t.e_long, e_rad: rotation * t.e_rad };
+    }
+    for f in &mut mesh.fibres {
+        *f = f.map(|v| rotation * v);
+    }
+    for e in &mut mesh.ends {
+        e.centre = rotation * e.centre + shift;
+        e.outward_normal = rotation * e.outward_normal;
+    }
+    mesh
+}
+
+/// Joins vessel meshes into one [`VesselMesh`] with several outlets, the way a branched mesh
+/// names its ends: the first inlet keeps the name `inlet`, every other end (the other parts'
+/// inlets included) becomes an outlet `outlet_1`, `outlet_2`, ... in part order, and the end's
+/// node and face sets (`lumen_<end>`, `wall_<end>`) are renamed with it. Each part's branches
+/// follow the previous part's (`branch_of`, `branch_names` `part<k>_<name>`); elements are
+/// ordered region by region (lumen, intima, media, adventitia), within a region part by part, as
+/// the mesh invariants want; nodes part by part. Sets of the same name are merged and sorted.
+///
+/// The parts stay disjoint, so the result is no vessel to simulate (a flow solver sees separate
+/// regions, and the renamed inlets carry no inflow): it exercises the writers' per-end and
+/// per-branch bookkeeping on a mesh with several outlets, several branches and oblique ends.
+pub fn join_disjoint(parts: Vec<VesselMesh>) -> VesselMesh {
+    let layers = parts.first().map(|p| p.layers.clone()).unwrap_or_default();
+    let mut node_offset = Vec::with_capacity(parts.len());
+    let mut nodes = Vec::new();
+    for p in &parts {
+        node_offset.push(nodes.len() as u32);
+        nodes.extend_from_slice(&p.nodes);
+    }
+    // New element index of every part's elements: region-major, then part.
+    let mut new_index: Vec<Vec<u32>> = parts.iter().map(|p| vec![0; p.hexes.len()]).collect();
+    let (mut hexes, mut regions, mut branch_of) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut triads, mut fibres, mut quality) = (Vec::new(), Vec::new(), Vec::new());
+    let mut branch_offset = Vec::with_capacity(parts.len());
+    let mut branch_names = Vec::new();
+    for (k, p) in parts.iter().enumerate() {
+        branch_offset.push(branch_names.len() as u32);
+        branch_names.extend(p.branch_names.iter().map(|n| format!("part{k}_{n}")));
+    }
+    for region in Region::ALL {
+        for (k, p) in parts.iter().enumerate() {
+            for e in p.region_range(region) {
+                new_index[k][e] = hexes.len() as u32;
+                hexes.push(p.hexes[e].map(|n| n + node_offset[k]));
+                regions.push(region);
+                branch_of.push(p.branch_of[e] + branch_offset[k]);
+                triads.push(p.triads[e]);
+                fibres.push(p.fibres[e]);
+                quality.push(p.quality[e]);
+            }
+        }
+    }
+    let mut ends = Vec::new();
+    let mut node_sets: IndexMap<String, Vec<u32>> = IndexMap::new();
+    let mut face_sets: IndexMap<String, Vec<ElementFace>> = IndexMap::new();
+    let mut outlets = 0;
+    for (k, p) in parts.iter().enumerate() {
+        let mut rename: Vec<(String, String)> = Vec::new();
+        for end in &p.ends {
+            let mut end = end.clone();
+            let name = if end.is_inlet && !ends.iter().any(|e: &VesselEnd| e.is_inlet) {
+                "inlet".to_string()
+            } else {
+                outlets += 1;
+                end.is_inlet = false;
+                format!("outlet_{outlets}")
+            };
+            rename.push((sets::lumen_end(&end.name), sets::lumen_end(&name)));
+            rename.push((sets::wall_end(&end.name), sets::wall_end(&name)));
+            end.name = name;
+            end.branch += branch_offset[k] as usize;
+            ends.push(end);
+        }
+        let renamed =
+            |set: &str| rename.iter().find(|(old, _)| old == set).map_or(set.to_string(), |(_, new)| new.clone());
+        for (name, members) in &p.node_sets {
+            node_sets.entry(renamed(name)).or_default().extend(members.iter().map(|n| n + node_offset[k]));
+        }
+        for (name, faces) in &p.face_sets {
+            face_sets
+                .entry(renamed(name))
+                .or_default()
+                .extend(faces.iter().map(|f| ElementFace { element: new_index[k][f.element as usize], face: f.face }));
+        }
+    }
+    for v in node_sets.values_mut() {
+        v.sort_unstable();
+    }
+    for v in face_sets.values_mut() {
+        v.sort_unstable();
+    }
+    VesselMesh {
+        nodes,
+        hexes,
+        regions,
+        branch_of,
+        triads,
+        fibres,
+        quality,
+        layers,
+        ends,
+        node_sets,
+        face_sets,
+        branch_names,
+    }
+}
+
+/// Three straight tubes ([`straight_tube_mesh`] with `config`) joined by [`join_disjoint`]: the
+/// first along +z (ends `inlet` and `outlet_1`), the second and third tilted by 35 and -50
+/// degrees about the y axis and set 12 and 24 mm apart in y (apart from each other), so that
+/// their ends (`outlet_2` to `outlet_5`) are oblique. 3 branches, 6 ends, for the writers'
+/// multi-outlet tests.
+pub fn multi_outlet_mesh(config: &MeshConfig) -> Result<VesselMesh> {
+    let tube = straight_tube_mesh(config)?.mesh;
+    let parts = [(0.0f64, 0.0), (35.0, 12.0), (-50.0, 24.0)]
+        .iter()
+        .map(|&(angle, y)| {
+            let rotation = Rotation3::from_axis_angle(&Vector3::y_axis(), angle.to_radians());
+            moved(tube.clone(), rotation, Vector3::new(0.0, y, 0.0))
+        })
+        .collect();
+    Ok(join_disjoint(parts))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The joined mesh keeps the invariants of a mesh built by vesselhex.
+    #[test]
+    fn multi_outlet_mesh_keeps_the_mesh_invariants() {
+        let mut c = MeshConfig::default();
+        c.lumen.core_elements = 2;
+        c.lumen.radial_elements = 2;
+        c.lumen.axial_spacing_mm = Some(3.0);
+        let one = straight_tube_mesh(&c).unwrap().mesh;
+        let m = multi_outlet_mesh(&c).unwrap();
+        assert_eq!(m.nodes.len(), 3 * one.nodes.len());
+        assert_eq!(m.hexes.len(), 3 * one.hexes.len());
+        // regions contiguous in order, each three times the tube's, branches 0, 1, 2 in each
+        assert!(m.regions.windows(2).all(|w| w[0] <= w[1]));
+        for r in Region::ALL {
+            let range = m.region_range(r);
+            assert_eq!(range.len(), 3 * one.count(r));
+            assert!(m.branch_of[range].windows(2).all(|w| w[0] <= w[1]));
+        }
+        assert_eq!(m.branch_names.len(), 3);
+        let names: Vec<&str> = m.ends.iter().map(|e| e.name.as_str()).collect();
+        assert_eq!(names, ["inlet", "outlet_1", "outlet_2", "outlet_3", "outlet_4", "outlet_5"]);
+        assert_eq!(m.ends.iter().filter(|e| e.is_inlet).count(), 1);
+        for end in &m.ends {
+            // each end's sets exist, lie in its plane, and its faces point along its normal
+            for set in [sets::lumen_end(&end.name), sets::wall_end(&end.name)] {
+                let nodes = &m.node_sets[&set];
+                assert!(!nodes.is_empty() && nodes.windows(2).all(|w| w[0] < w[1]), "{set}");
+                for &n in nodes {
+                    assert!((m.nodes[n as usize] - end.centre).dot(&end.outward_normal).abs() < 1e-9, "{set}");
+                }
+                for f in &m.face_sets[&set] {
+                    let q = crate::mesh::face_nodes(&m.hexes[f.element as usize], f.face as usize);
+                    let a = crate::mesh::quad_area_vector(q.map(|n| m.nodes[n as usize]));
+                    assert!(a.normalize().dot(&end.outward_normal) > 1.0 - 1e-9, "{set}");
+                    assert_eq!(m.branch_of[f.element as usize] as usize, end.branch, "{set}");
+                }
+            }
+        }
+        // triads still right-handed after the rotations, and e_rad still points out of the axis
+        for (e, t) in m.triads.iter().enumerate() {
+            assert!((t.e_circ.cross(&t.e_long) - t.e_rad).norm() < 1e-9, "element {e}");
+        }
+        for s in m.node_sets.values() {
+            assert!(s.windows(2).all(|w| w[0] < w[1]));
+        }
+        for s in m.face_sets.values() {
+            assert!(s.windows(2).all(|w| w[0] < w[1]));
+        }
+    }
 }

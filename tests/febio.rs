@@ -1109,8 +1109,86 @@ fn hex20_is_refused_by_the_fsi_deck_with_the_key() {
     std::fs::write(&case, "[febio]\nelement = \"hex20\"\n").unwrap();
     let c = MeshConfig::from_case_file(&case, None).unwrap();
     assert_eq!(c.febio.element, vesselhex::writers::febio::FebioElement::Hex20);
+    // with febio-fsi requested, before any meshing
+    std::fs::write(&case, "formats = [\"febio\", \"febio-fsi\"]\n[febio]\nelement = \"hex20\"\n").unwrap();
+    let e = MeshConfig::from_case_file(&case, None).unwrap_err().to_string();
+    assert!(e.contains("febio.element") && e.contains("febio-fsi"), "{e}");
     std::fs::write(&case, "[febio]\nelement = \"hex27\"\n").unwrap();
     let e = MeshConfig::from_case_file(&case, None).unwrap_err().to_string();
     assert!(e.contains("hex27") && e.contains("case.toml"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+// ------------------------------------------------------------------------------------------------
+// Several outlets
+// ------------------------------------------------------------------------------------------------
+
+/// Both decks of a mesh with an inlet and five outlets (three disjoint tubes, two oblique): every
+/// end has its ring set and its support, the inflow goes through the inlet only, and every outlet
+/// has its own pressure condition and backflow stabilization on its own outward surface.
+#[test]
+fn every_end_of_a_multi_outlet_mesh_gets_its_sets_and_conditions() {
+    let mut c = MeshConfig::default();
+    c.lumen.core_elements = 2;
+    c.lumen.radial_elements = 2;
+    c.lumen.axial_spacing_mm = Some(3.0);
+    let mesh = vesselhex::testing::multi_outlet_mesh(&c).unwrap();
+    let ends: Vec<&str> = mesh.ends.iter().map(|e| e.name.as_str()).collect();
+    let outlets: Vec<&str> = ends[1..].to_vec();
+    assert_eq!(ends[0], "inlet");
+
+    let wall = check_all(&wall_deck(&mesh, &options(LengthUnit::Mm)).unwrap(), "solid").unwrap();
+    let boundary = wall.root.one("Boundary").unwrap();
+    let supports = end_supports(&mesh).unwrap();
+    assert_eq!(supports.len(), ends.len());
+    for (s, end) in supports.iter().zip(&mesh.ends) {
+        let set = sets::wall_end(&end.name);
+        let want: Vec<u32> = mesh.node_sets[&set].iter().map(|n| n + 1).collect();
+        assert_eq!(wall.node_set(&set).unwrap(), want, "{set}");
+        let bc =
+            boundary.all("bc").find(|b| b.attr("node_set") == Some(&set)).unwrap_or_else(|| panic!("{set} not held"));
+        let held: Vec<bool> = ["x_dof", "y_dof", "z_dof"].iter().map(|t| bc.one(t).unwrap().text == "1").collect();
+        // an end whose normal is a global axis is held along it; an oblique one is clamped
+        let axis_aligned = end.outward_normal.iter().any(|c| c.abs() > 1.0 - 1e-9);
+        assert_eq!(held.iter().filter(|h| **h).count(), if axis_aligned { 1 } else { 3 }, "{set}");
+        assert_eq!(held, s.ring_dofs.to_vec());
+    }
+
+    let fsi = check_all(&fsi_deck(&mesh, &options(LengthUnit::Mm)).unwrap(), "fluid-FSI").unwrap();
+    let lumen = [fsi.block("lumen").unwrap()];
+    for end in &ends {
+        let surface = sets::lumen_end(end);
+        check_outward(&fsi, &surface, &lumen).unwrap();
+        assert_eq!(fsi.surface(&surface).unwrap().children.len(), mesh.face_sets[&surface].len(), "{surface}");
+        assert!(fsi.node_set(&format!("{surface}_inner")).is_some(), "{surface}_inner");
+        assert!(fsi.node_set(&sets::wall_end(end)).is_some());
+    }
+    let loads = fsi.root.one("Loads").unwrap();
+    let on = |kind: &str| -> Vec<String> {
+        let mut v: Vec<String> = loads
+            .all("surface_load")
+            .chain(fsi.root.one("Boundary").unwrap().all("bc"))
+            .filter(|l| l.attr("type") == Some(kind))
+            .map(|l| l.attr("surface").unwrap().to_string())
+            .collect();
+        v.sort();
+        v
+    };
+    let mut outlet_surfaces: Vec<String> = outlets.iter().map(|o| sets::lumen_end(o)).collect();
+    outlet_surfaces.sort();
+    assert_eq!(on("fluid normal velocity"), ["lumen_inlet"]);
+    assert_eq!(on("fluid pressure"), outlet_surfaces);
+    assert_eq!(on("fluid backflow stabilization"), outlet_surfaces);
+    // every end is fixed for the mesh motion: wall ring and lumen face
+    let fixed: BTreeSet<String> = fsi
+        .root
+        .one("Boundary")
+        .unwrap()
+        .all("bc")
+        .filter(|b| b.attr("type") == Some("zero displacement"))
+        .map(|b| b.attr("node_set").unwrap().to_string())
+        .collect();
+    for end in &ends {
+        assert!(fixed.contains(&sets::wall_end(end)) && fixed.contains(&format!("lumen_{end}_inner")), "{end}");
+    }
 }

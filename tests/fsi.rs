@@ -15,6 +15,7 @@ use vesselhex::config::MeshConfig;
 use vesselhex::mesh::{face_nodes, quad_area_vector, VesselMesh};
 use vesselhex::testing::straight_tube_mesh;
 use vesselhex::units::LengthUnit;
+use vesselhex::writers::inp::ElementType;
 use vesselhex::writers::openfoam::read_polymesh;
 use vesselhex::writers::{calculix, fsi, openfoam, WriteOptions};
 
@@ -132,7 +133,11 @@ fn check_map(mesh: &VesselMesh, unit: LengthUnit, tag: &str) {
         worst = worst.max((poly.points[fp] / to_m - x).norm());
         worst = worst.max((deck.nodes[&sn] - x).norm());
     }
-    eprintln!("{tag}: {} interface nodes, max coordinate mismatch {worst:.3e} {} (model size {size:.3e})", rows.len(), unit.name());
+    eprintln!(
+        "{tag}: {} interface nodes, max coordinate mismatch {worst:.3e} {} (model size {size:.3e})",
+        rows.len(),
+        unit.name()
+    );
     assert!(worst <= 1e-9 * size, "{tag}: mismatch {worst:e}");
 
     // The wall patch points and the solid interface NSET are exactly the two columns.
@@ -261,7 +266,10 @@ fn parse_precice(path: &Path) -> PreciceNames {
             .attributes()
             .map(|a| {
                 let a = a.unwrap();
-                (a.key.as_ref().to_string(), a.normalized_value(quick_xml::XmlVersion::Explicit1_0).unwrap().into_owned())
+                (
+                    a.key.as_ref().to_string(),
+                    a.normalized_value(quick_xml::XmlVersion::Explicit1_0).unwrap().into_owned(),
+                )
             })
             .collect();
         let attr = |k: &str| attrs.get(k).cloned().unwrap_or_default();
@@ -284,7 +292,8 @@ fn parse_precice(path: &Path) -> PreciceNames {
             }
             "provide-mesh" | "receive-mesh" | "write-data" | "read-data" => {
                 let p = participant.as_ref().unwrap();
-                let what = if tag.ends_with("mesh") { attr("name") } else { format!("{}@{}", attr("name"), attr("mesh")) };
+                let what =
+                    if tag.ends_with("mesh") { attr("name") } else { format!("{}@{}", attr("name"), attr("mesh")) };
                 names.participants.get_mut(p).unwrap().push((tag.clone(), what, attr("from")));
             }
             t if t.starts_with("mapping:") => {
@@ -391,7 +400,9 @@ fn precice_names_agree_between_the_configuration_files() {
     assert_eq!(n.participants.keys().cloned().collect::<BTreeSet<_>>(), set(&[&fluid, &solid]));
     let has = |p: &str, tag: &str, what: &str| n.participants[p].iter().any(|(t, w, _)| t == tag && w == what);
     assert!(has(&fluid, "provide-mesh", &faces_mesh) && has(&fluid, "provide-mesh", &nodes_mesh));
-    assert!(n.participants[&fluid].iter().any(|(t, w, from)| t == "receive-mesh" && *w == solid_mesh && *from == solid));
+    assert!(n.participants[&fluid]
+        .iter()
+        .any(|(t, w, from)| t == "receive-mesh" && *w == solid_mesh && *from == solid));
     assert!(has(&fluid, "write-data", &format!("{force}@{faces_mesh}")));
     assert!(has(&fluid, "read-data", &format!("{displacement}@{nodes_mesh}")));
     assert!(has(&fluid, "mapping:nearest-neighbor:write:conservative", &format!("{faces_mesh}->{solid_mesh}")));
@@ -419,7 +430,10 @@ fn precice_names_agree_between_the_configuration_files() {
             assert!(!log.to_ascii_lowercase().contains("error"), "precice-config-check reports an error:\n{log}");
         }
         Err(_) => {
-            assert!(!under_ci(), "CI=true but precice-config-check is not installed (pip install precice-config-check)");
+            assert!(
+                !under_ci(),
+                "CI=true but precice-config-check is not installed (pip install precice-config-check)"
+            );
             eprintln!("skipped: precice-config-check not installed");
         }
     }
@@ -488,7 +502,11 @@ fn fsi_deck_runs_in_ccx_with_a_fixed_load() {
     let out = Command::new("ccx").args(["-i", "fixed"]).current_dir(&job).env("OMP_NUM_THREADS", "1").output().unwrap();
     let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     let sta = std::fs::read_to_string(job.join("fixed.sta")).unwrap_or_default();
-    eprintln!("ccx fixed-load FSI deck: exit {:?} in {:.1} s, dt {dt:e}\n{sta}", out.status.code(), started.elapsed().as_secs_f64());
+    eprintln!(
+        "ccx fixed-load FSI deck: exit {:?} in {:.1} s, dt {dt:e}\n{sta}",
+        out.status.code(),
+        started.elapsed().as_secs_f64()
+    );
     assert!(out.status.success(), "ccx failed:\n{log}");
     assert!(log.contains("Job finished"), "no 'Job finished':\n{log}");
     let warnings: Vec<&str> = log.lines().filter(|l| l.contains("*WARNING")).collect();
@@ -521,6 +539,20 @@ fn fsi_deck_runs_in_ccx_with_a_fixed_load() {
     let mean = ur.iter().sum::<f64>() / ur.len() as f64;
     eprintln!("mean radial displacement of the middle interface nodes after 2 windows: {mean:e} m");
     assert!(mean > 0.0, "the wall did not move outward: {mean:e}");
+    // The end rings (interface nodes among them, loaded in all three global dofs) moved only
+    // radially in their end planes: the equations hold in ccx's solution.
+    let largest = disp.values().map(|u| Vector3::from(*u).norm()).fold(0.0, f64::max);
+    let mut worst: f64 = 0.0;
+    for end in &mesh.ends {
+        for &i in &mesh.node_sets[&vesselhex::mesh::sets::wall_end(&end.name)] {
+            let u = Vector3::from(disp[&(i as u64 + 1)]);
+            let d = mesh.nodes[i as usize] - end.centre;
+            let radial = (d - end.outward_normal * d.dot(&end.outward_normal)).normalize();
+            worst = worst.max(u.dot(&end.outward_normal).abs()).max((u - radial * u.dot(&radial)).norm());
+        }
+    }
+    eprintln!("end rings: largest non-radial displacement {worst:e} m (largest displacement {largest:e} m)");
+    assert!(worst <= 1e-9 * largest, "an end-ring node moved off its radial line: {worst:e} m");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -533,8 +565,15 @@ fn formats_fsi_implies_openfoam_and_calculix() {
     let out = temp_dir("fsi-cli");
     let _ = std::fs::remove_dir_all(&out);
     let report = mesh_cli(&stl, &csv, &out, &["--formats", "fsi", "--preset", "coarse"]);
-    let outputs: Vec<String> = report["outputs"].as_array().unwrap().iter().map(|v| v.as_str().unwrap().to_string()).collect();
-    for f in ["openfoam/constant/polyMesh/points", "calculix/model.inp", "fsi/interface_nodes.csv", "fsi/calculix/fsi.inp", "fsi/precice-config.xml"] {
+    let outputs: Vec<String> =
+        report["outputs"].as_array().unwrap().iter().map(|v| v.as_str().unwrap().to_string()).collect();
+    for f in [
+        "openfoam/constant/polyMesh/points",
+        "calculix/model.inp",
+        "fsi/interface_nodes.csv",
+        "fsi/calculix/fsi.inp",
+        "fsi/precice-config.xml",
+    ] {
         assert!(outputs.iter().any(|o| o == f), "{f} not in the outputs: {outputs:?}");
         assert!(out.join(f).is_file(), "{f} missing");
     }
@@ -582,5 +621,233 @@ fn assembled_fluid_case_runs_two_steps_without_the_adapter() {
     assert!(!log.contains("FOAM FATAL"), "{log}");
     assert!(log.contains("cellDisplacement") || log.contains("Mesh"), "no mesh motion solve:\n{log}");
     eprintln!("pimpleFoam: {} time steps on the dynamic mesh", log.matches("\nTime = ").count());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+// ---------------------------------------------------------------------------------------------
+// End constraints of the FSI deck
+
+/// `*TRANSFORM` node sets and `*EQUATION` terms of an .inp deck: per node label the equations it
+/// appears in as rows (coefficients of u_x, u_y, u_z), and the dependent (first) term of each.
+struct Constraints {
+    transformed_sets: Vec<String>,
+    rows: BTreeMap<u64, Vec<Vector3<f64>>>,
+    dependents: Vec<(u64, usize)>,
+    boundary_lines: Vec<String>,
+}
+
+fn read_constraints(text: &str) -> Constraints {
+    let mut c =
+        Constraints { transformed_sets: vec![], rows: BTreeMap::new(), dependents: vec![], boundary_lines: vec![] };
+    let mut card = String::new();
+    for line in text.lines().filter(|l| !l.starts_with("**")) {
+        if let Some(k) = line.strip_prefix('*') {
+            card = k.to_ascii_uppercase();
+            if let Some(set) = card.strip_prefix("TRANSFORM, NSET=") {
+                c.transformed_sets.push(set.split(',').next().unwrap().trim().to_string());
+            }
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).filter(|s| !s.is_empty()).collect();
+        if card == "EQUATION" && fields.len() > 1 {
+            // one equation on one line: label, dof, coefficient per term, all terms on one node here
+            let mut row = Vector3::zeros();
+            let node: u64 = fields[0].parse().unwrap();
+            for t in fields.chunks(3) {
+                assert_eq!(t[0].parse::<u64>().unwrap(), node, "an end equation ties two nodes: {line}");
+                row[t[1].parse::<usize>().unwrap() - 1] += t[2].parse::<f64>().unwrap();
+            }
+            c.dependents.push((node, fields[1].parse().unwrap()));
+            c.rows.entry(node).or_default().push(row);
+        } else if card.starts_with("BOUNDARY") {
+            c.boundary_lines.push(line.to_string());
+        }
+    }
+    c
+}
+
+#[test]
+fn fsi_deck_holds_the_end_rings_by_equations_in_global_axes() {
+    check_end_equations(&tube(), "ends-tube");
+}
+
+/// The curved fixture's outlet is oblique (its normal 120 deg from the inlet's, in the x-z plane).
+#[test]
+fn fsi_deck_holds_oblique_end_rings_by_their_normal() {
+    let (stl, csv) = fixture("curved");
+    let mesh = common::mesh_files(&stl, &csv, &MeshConfig::default());
+    let outlet = mesh.ends.iter().find(|e| !e.is_inlet).unwrap();
+    assert!(outlet.outward_normal.iter().filter(|c| c.abs() > 0.1).count() >= 2, "{:?}", outlet.outward_normal);
+    check_end_equations(&mesh, "ends-curved");
+}
+
+fn check_end_equations(mesh: &VesselMesh, tag: &str) {
+    let (dir, _) = write_all(mesh, LengthUnit::Mm, tag);
+    let text = std::fs::read_to_string(dir.join("fsi/calculix/fsi.inp")).unwrap();
+    let deck = read_deck(&dir.join("fsi/calculix/fsi.inp"));
+    let c = read_constraints(&text);
+    // (a) no interface node is under a *TRANSFORM (there is none at all)
+    let interface: BTreeSet<u64> = deck.nsets["NLUMEN_WALL"].iter().copied().collect();
+    for set in &c.transformed_sets {
+        let under: BTreeSet<u64> = deck.nsets[set].iter().copied().collect();
+        assert!(under.is_disjoint(&interface), "{set} puts interface nodes in local axes");
+    }
+    assert!(c.transformed_sets.is_empty(), "{:?}", c.transformed_sets);
+    // ... while the inflation deck keeps its cylindrical systems
+    let inflation = read_constraints(&std::fs::read_to_string(dir.join("calculix/model.inp")).unwrap());
+    assert_eq!(inflation.transformed_sets.len(), mesh.ends.len());
+    // (b) every end-ring node: exactly two equations whose only free motion is the in-plane radial
+    // direction, so the displacement along the end's outward normal (and the circumferential one)
+    // is removed
+    let mut ring_nodes = BTreeSet::new();
+    let mut end_ring_interface = 0;
+    for end in &mesh.ends {
+        let n = end.outward_normal;
+        for &i in &mesh.node_sets[&vesselhex::mesh::sets::wall_end(&end.name)] {
+            let label = i as u64 + 1;
+            assert!(ring_nodes.insert(label), "node {label} in two rings");
+            end_ring_interface += interface.contains(&label) as usize;
+            let rows = c.rows.get(&label).unwrap_or_else(|| panic!("{} node {label} has no equation", end.name));
+            assert_eq!(rows.len(), 2, "{} node {label}", end.name);
+            let free = rows[0].cross(&rows[1]);
+            assert!(free.norm() > 0.1, "{} node {label}: the two equations are dependent", end.name);
+            let free = free.normalize();
+            let d = mesh.nodes[i as usize] - end.centre;
+            let radial = (d - n * d.dot(&n)).normalize();
+            assert!(free.dot(&n).abs() < 1e-12, "{} node {label}: normal motion {} left free", end.name, free.dot(&n));
+            assert!(
+                free.cross(&radial).norm() < 1e-12,
+                "{} node {label}: free motion {free:?} is not radial",
+                end.name
+            );
+            // the normal itself is a combination of the rows: n . u = 0 follows from the equations
+            let (a, b) = (rows[0], rows[1]);
+            let gram = nalgebra::Matrix2::new(a.dot(&a), a.dot(&b), a.dot(&b), b.dot(&b));
+            let coef = gram.try_inverse().unwrap() * nalgebra::Vector2::new(a.dot(&n), b.dot(&n));
+            assert!((a * coef[0] + b * coef[1] - n).norm() < 1e-12, "{} node {label}", end.name);
+        }
+    }
+    assert!(end_ring_interface > 0, "the test tube's rings hold no interface node: the case is not covered");
+    assert_eq!(c.rows.keys().copied().collect::<BTreeSet<_>>(), ring_nodes, "equations on nodes outside the end rings");
+    // a dof is eliminated once, and none is also fixed by *BOUNDARY
+    let unique: BTreeSet<_> = c.dependents.iter().collect();
+    assert_eq!(unique.len(), c.dependents.len(), "a dof is the dependent term of two equations");
+    assert!(c.boundary_lines.is_empty(), "{:?}", c.boundary_lines);
+    eprintln!(
+        "{tag} fsi.inp: {} end-ring nodes ({} of them interface nodes) held by {} equations, no *TRANSFORM",
+        ring_nodes.len(),
+        end_ring_interface,
+        c.dependents.len()
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The FSI deck's ends rely on ccx carrying a force on an eliminated dof (the adapter loads all
+/// three dofs of every interface node) over to the free one: a unit cube held at the bottom, its
+/// top corner (1, 1, 1) tied by u_x = u_y, loaded once on the eliminated u_x and once on the free
+/// u_y, must move the same by the mirror symmetry x <-> y.
+#[test]
+fn ccx_carries_a_force_on_an_eliminated_dof_over() {
+    if !ccx_available() {
+        return;
+    }
+    let dir = temp_dir("fsi-eq-force");
+    let mut moved = vec![];
+    for dof in [1, 2] {
+        let deck = format!(
+            "*NODE\n1, 0., 0., 0.\n2, 1., 0., 0.\n3, 1., 1., 0.\n4, 0., 1., 0.\n5, 0., 0., 1.\n6, 1., 0., 1.\n\
+             7, 1., 1., 1.\n8, 0., 1., 1.\n*ELEMENT, TYPE=C3D8, ELSET=E\n1, 1, 2, 3, 4, 5, 6, 7, 8\n\
+             *NSET, NSET=BOTTOM\n1, 2, 3, 4\n*NSET, NSET=TOP\n7\n*BOUNDARY\nBOTTOM, 1, 3\n*EQUATION\n2\n7, 1, 1., 7, 2, -1.\n\
+             *MATERIAL, NAME=M\n*ELASTIC\n1000., 0.3\n*DENSITY\n1.\n*SOLID SECTION, ELSET=E, MATERIAL=M\n\
+             *STEP, NLGEOM, INC=100\n*DYNAMIC\n0.1, 0.2\n*CLOAD\n7, {dof}, 1.\n*NODE PRINT, NSET=TOP\nU\n*END STEP\n"
+        );
+        let job = format!("load{dof}");
+        std::fs::write(dir.join(format!("{job}.inp")), deck).unwrap();
+        let out =
+            Command::new("ccx").args(["-i", &job]).current_dir(&dir).env("OMP_NUM_THREADS", "1").output().unwrap();
+        let log = String::from_utf8_lossy(&out.stdout).to_string();
+        assert!(out.status.success() && log.contains("Job finished") && !log.contains("*WARNING"), "{log}");
+        let dat = std::fs::read_to_string(dir.join(format!("{job}.dat"))).unwrap();
+        let line = dat.lines().rfind(|l| l.split_whitespace().next() == Some("7")).unwrap().to_string();
+        let u: Vec<f64> = line.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect();
+        moved.push(u);
+    }
+    eprintln!("u of the tied corner, load on u_x (eliminated): {:?}; on u_y (free): {:?}", moved[0], moved[1]);
+    assert!(moved[0][0] > 1e-4, "the force on the eliminated dof did nothing");
+    for k in 0..3 {
+        assert!((moved[0][k] - moved[1][k]).abs() <= 1e-6 * moved[1][0].abs(), "{k}: {:?} vs {:?}", moved[0], moved[1]);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// C3D20 has mid-edge nodes on the interface that the map cannot serve: refused with the key.
+#[test]
+fn quadratic_calculix_elements_are_refused_by_the_fsi_package() {
+    let mesh = tube();
+    let dir = temp_dir("fsi-c3d20");
+    let mut options = WriteOptions::default();
+    for element in [ElementType::C3D20, ElementType::C3D20R] {
+        options.fe.calculix_element = element;
+        let e = fsi::write_fsi(&mesh, &options, &dir).unwrap_err().to_string();
+        assert!(e.contains("fe.calculix_element") && e.contains(element.name()) && e.contains("C3D8I"), "{e}");
+    }
+    assert!(!dir.join("fsi/interface_nodes.csv").exists(), "a refused package left files");
+    // and before any meshing when the fsi format is asked for
+    let mut config = MeshConfig { formats: vec!["fsi".into()], ..Default::default() };
+    config.fe.calculix_element = ElementType::C3D20;
+    let e = config.validate().unwrap_err().to_string();
+    assert!(e.contains("fe.calculix_element") && e.contains("fsi"), "{e}");
+    config.formats = vec!["calculix".into()];
+    config.validate().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Several outlets
+
+/// The names of the entries of an OpenFOAM field file's `boundaryField` (one level deep).
+fn boundary_field_entries(text: &str) -> Vec<String> {
+    let body = &text[text.find("boundaryField").unwrap()..];
+    let (mut names, mut depth, mut word) = (vec![], 0, String::new());
+    for line in body.lines().map(|l| l.split("//").next().unwrap().trim()) {
+        match line {
+            "{" => {
+                depth += 1;
+                if depth == 2 {
+                    names.push(word.clone());
+                }
+            }
+            "}" => depth -= 1,
+            w if depth == 1 && !w.is_empty() => word = w.to_string(),
+            _ => {}
+        }
+    }
+    names
+}
+
+/// The FSI package of a mesh with an inlet and five outlets (three disjoint tubes, two oblique):
+/// the maps read back exactly, the end rings of all six ends are held by their own equations, and
+/// the fluid overlay has an entry for every end patch.
+#[test]
+fn fsi_package_of_a_multi_outlet_mesh() {
+    let mut c = MeshConfig::default();
+    c.lumen.core_elements = 2;
+    c.lumen.radial_elements = 2;
+    c.lumen.axial_spacing_mm = Some(3.0);
+    c.wall.thickness_mm = Some(0.6);
+    let mesh = vesselhex::testing::multi_outlet_mesh(&c).unwrap();
+    assert_eq!(mesh.ends.len(), 6);
+    check_map(&mesh, LengthUnit::Mm, "multi");
+    check_end_equations(&mesh, "ends-multi");
+    let (dir, _) = write_all(&mesh, LengthUnit::Mm, "multi-overlay");
+    let ends: Vec<String> = mesh.ends.iter().map(|e| e.name.clone()).collect();
+    let u = boundary_field_entries(&std::fs::read_to_string(dir.join("fsi/openfoam/0/U")).unwrap());
+    let mut want = ends.clone();
+    want.push("wall".into());
+    assert_eq!(u, want, "fsi/openfoam/0/U");
+    let d = boundary_field_entries(&std::fs::read_to_string(dir.join("fsi/openfoam/0/pointDisplacement")).unwrap());
+    let mut want = vec!["wall".to_string()];
+    want.extend(ends.iter().cloned());
+    assert_eq!(d, want, "fsi/openfoam/0/pointDisplacement");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -214,8 +214,12 @@ fn fsi_mesh_passes_checkmesh_and_splits_into_fluid_and_solid_regions() {
     assert_eq!(stat(&s, "cell zones"), 4);
     assert_eq!(stat(&s, "face zones"), 1);
     eprintln!("fsi: checkMesh Mesh OK; {}", s.join("; "));
-    let binary =
-        write(&mesh, "openfoam-fsi", &WriteOptions { openfoam: OpenFoamConfig { binary: true, ..Default::default() }, ..Default::default() }, &dir.join("binary"));
+    let binary = write(
+        &mesh,
+        "openfoam-fsi",
+        &WriteOptions { openfoam: OpenFoamConfig { binary: true, ..Default::default() }, ..Default::default() },
+        &dir.join("binary"),
+    );
     assert_eq!(read_polymesh(&binary).unwrap(), poly);
     assert_eq!(check_mesh(&binary, &[]), s, "fsi: ASCII and binary give different checkMesh summaries");
     let interface = mesh.face_sets[vesselhex::mesh::sets::LUMEN_WALL_FACES].len();
@@ -559,4 +563,125 @@ fn checkmesh_accepts_every_fixture_and_the_real_unbranched_vessels() {
     for (name, mesh) in common::real_unbranched_meshes(&vessels, &config) {
         check_ascii_and_binary(&mesh, name);
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Several outlets
+
+/// The boundaryField entries of a field file: patch name -> type.
+fn boundary_types(path: &Path) -> Vec<(String, String)> {
+    let t = tokens(&std::fs::read_to_string(path).unwrap());
+    let b = t.iter().position(|x| x == "boundaryField").unwrap();
+    assert_eq!(t[b + 1], "{");
+    let (mut out, mut i, mut depth) = (vec![], b + 2, 1);
+    while depth > 0 {
+        match t[i].as_str() {
+            "{" => depth += 1,
+            "}" => depth -= 1,
+            name if depth == 1 => {
+                assert_eq!(t[i + 1], "{", "{}: entry {name}", path.display());
+                let ty = t[i..].iter().position(|x| x == "type").unwrap() + i + 1;
+                out.push((name.to_string(), t[ty].clone()));
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    out
+}
+
+/// Sorted mesh node indices of a polyMesh face, through the point coordinates (metres -> mm).
+fn face_nodes_of(poly: &PolyMesh, face: usize, node_at: &std::collections::HashMap<[i64; 3], u32>) -> Vec<u32> {
+    let key = |p: nalgebra::Point3<f64>| [0, 1, 2].map(|k| (p[k] * 1e3 * 1e6).round() as i64);
+    let mut v: Vec<u32> = poly.faces[face].iter().map(|&p| node_at[&key(poly.points[p as usize])]).collect();
+    v.sort_unstable();
+    v
+}
+
+/// A mesh with an inlet and five outlets (three disjoint tubes, two of them oblique): every end
+/// is its own patch holding exactly its face set, in both polyMeshes, and has its own entry in
+/// 0/U and 0/p; OpenFOAM reads the fields against the mesh (every patch has its condition).
+/// checkMesh is not run: the parts are separate regions, which it reports.
+#[test]
+fn every_end_of_a_multi_outlet_mesh_is_its_own_patch_with_its_own_conditions() {
+    let mut c = MeshConfig::preset(Preset::Coarse);
+    c.lumen.axial_spacing_mm = Some(3.0);
+    let mesh = vesselhex::testing::multi_outlet_mesh(&c).unwrap();
+    let ends: Vec<&str> = mesh.ends.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(ends.len(), 6);
+    let dir = scratch("multi-outlet");
+    let node_at: std::collections::HashMap<[i64; 3], u32> = mesh
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, p)| ([0, 1, 2].map(|k| (p[k] * 1e6).round() as i64), i as u32))
+        .collect();
+    assert_eq!(node_at.len(), mesh.nodes.len());
+    let same_faces = |poly: &PolyMesh, patch: &str, set: &str| {
+        let p = poly.patch(patch).unwrap_or_else(|| panic!("no patch {patch}"));
+        let faces = &mesh.face_sets[set];
+        assert_eq!(p.size, faces.len(), "{patch}");
+        let mut ours: Vec<Vec<u32>> = p.range().map(|f| face_nodes_of(poly, f, &node_at)).collect();
+        let mut want: Vec<Vec<u32>> = faces
+            .iter()
+            .map(|f| {
+                let mut q = vesselhex::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize).to_vec();
+                q.sort_unstable();
+                q
+            })
+            .collect();
+        ours.sort();
+        want.sort();
+        assert_eq!(ours, want, "{patch} vs face set {set}");
+    };
+
+    // The flow case.
+    let case = write(&mesh, "openfoam", &WriteOptions::default(), &dir);
+    let poly = read_polymesh(&case).unwrap();
+    assert_rules(&poly, "multi-outlet");
+    let names: Vec<&str> = poly.patches.iter().map(|p| p.name.as_str()).collect();
+    let mut want = ends.clone();
+    want.push("wall");
+    assert_eq!(names, want);
+    for end in &ends {
+        same_faces(&poly, end, &vesselhex::mesh::sets::lumen_end(end));
+    }
+    same_faces(&poly, "wall", vesselhex::mesh::sets::LUMEN_WALL_FACES);
+    for (field, outlet_type) in [("U", "zeroGradient"), ("p", "fixedValue")] {
+        let entries = boundary_types(&case.join("0").join(field));
+        let entry_names: Vec<&str> = entries.iter().map(|e| e.0.as_str()).collect();
+        assert_eq!(entry_names, names, "0/{field}: one entry per patch, in patch order");
+        for (name, ty) in &entries {
+            if name.starts_with("outlet_") {
+                assert_eq!(ty, outlet_type, "0/{field} {name}");
+            }
+        }
+    }
+    // The inflow is on the inlet patch only, its size the inlet's.
+    let u = std::fs::read_to_string(case.join("0/U")).unwrap();
+    assert!(u.contains(&format!("nonuniform List<vector>\n{}\n(", poly.patch("inlet").unwrap().size)));
+
+    // The FSI mesh: every end's lumen patch and wall ring patch.
+    let fsi = write(&mesh, "openfoam-fsi", &WriteOptions::default(), &dir);
+    let fpoly = read_polymesh(&fsi).unwrap();
+    assert_rules(&fpoly, "multi-outlet fsi");
+    let names: Vec<String> = fpoly.patches.iter().map(|p| p.name.clone()).collect();
+    let mut want: Vec<String> = ends.iter().map(|e| e.to_string()).collect();
+    want.extend(ends.iter().map(|e| vesselhex::mesh::sets::wall_end(e)));
+    want.push("wall_outer".into());
+    assert_eq!(names, want);
+    for end in &ends {
+        same_faces(&fpoly, end, &vesselhex::mesh::sets::lumen_end(end));
+        let ring = vesselhex::mesh::sets::wall_end(end);
+        same_faces(&fpoly, &ring, &ring);
+    }
+
+    // OpenFOAM builds U and p on the mesh: a patch without its entry would be fatal.
+    if openfoam_available("every_end_of_a_multi_outlet_mesh_is_its_own_patch_with_its_own_conditions") {
+        // (postProcess exits 0 even when a field cannot be read: read its log)
+        let log = foam("postProcess", &["-func", "writeCellCentres", "-fields", "(U p)", "-time", "0"], &case);
+        assert!(!log.contains("FOAM FATAL"), "{log}");
+        eprintln!("multi-outlet: postProcess read U and p on {} patches", poly.patches.len());
+    }
+    cleanup(&dir);
 }

@@ -748,7 +748,13 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
     let u = MechanicalUnits::of(options.length_unit);
     let f = &cfg.fsi;
     let b = &cfg.blood;
-    let inlet = mesh.inlet().ok_or_else(|| Error::Geometry("FEBio FSI: the mesh has no inlet".into()))?;
+    let inlets: Vec<_> = mesh.ends.iter().filter(|e| e.is_inlet).collect();
+    let [inlet] = inlets.as_slice() else {
+        return Err(Error::Geometry(format!(
+            "FEBio FSI: the mesh has {} inlet ends; the deck drives the flow through exactly one",
+            inlets.len()
+        )));
+    };
     let outlets: Vec<_> = mesh.outlets().collect();
     if outlets.is_empty() {
         return Err(Error::Geometry("FEBio FSI: the mesh has no outlet".into()));

@@ -35,14 +35,23 @@
 //! * `calculix/fsi.inp`: the wall model of `calculix/model.inp` **in SI units** (metres, like the
 //!   fluid, since preCICE does not convert), the node set `NLUMEN_WALL` (the interface nodes, the
 //!   adapter's `N<patch>`), a `*DYNAMIC` step with zero `*CLOAD` on it; `calculix/config.yml` for
-//!   the CalculiX adapter (patch `lumen_wall`). The inflation deck is not changed.
+//!   the CalculiX adapter (patch `lumen_wall`). The inflation deck is not changed. The end rings
+//!   are held by `*EQUATION`s in global axes ([`EndHold::Equations`]: each ring node moves only
+//!   along its radial direction in its end plane, oblique ends included), not by the inflation
+//!   deck's cylindrical `*TRANSFORM`: the end rings hold interface nodes, and ccx would read the
+//!   adapter's global-axis forces on a transformed node in its local axes.
+//!
+//! Only bilinear CalculiX elements (C3D8I, C3D8, C3D8R) are accepted: the map pairs fluid points
+//! with corner nodes and lumps each face's force on its four corners, so a C3D20 wall would leave
+//! its interface mid-edge nodes without force or displacement; `fe.calculix_element = C3D20*` is
+//! refused with that reason.
 //! * `Allrun`, `README.md`.
 //!
 //! Time: one fluid time step per coupling window, dt = min(1e-4 s, Courant 0.5 of the inflow);
 //! end time `openfoam.end_time` or 100 windows.
 
 use super::inp::{deck_parts, fmt_const, Dialect, EndHold};
-use super::openfoam::{inlet_velocities, lumen_polymesh, render, PolyMesh};
+use super::openfoam::{end_vars, inlet_velocities, lumen_polymesh, render, EndNames, PolyMesh};
 use super::WriteOptions;
 use crate::config::InletProfile;
 use crate::error::{Error, Result};
@@ -209,6 +218,11 @@ const TEMPLATES: &[(&str, &str)] = &[
     ("README.md", include_str!("../../templates/fsi/README.md")),
 ];
 const STEP_TEMPLATE: &str = include_str!("../../templates/fsi/calculix/step_fsi.inp");
+/// The `pointDisplacement` entry of one end patch (inlet or outlet), `{{end}}` = its name.
+const END_PIECE: (&str, &str) = (
+    "templates/fsi/openfoam/0/pointDisplacement.end",
+    include_str!("../../templates/fsi/openfoam/0/pointDisplacement.end"),
+);
 
 /// Coupling time window and end time, s.
 fn timing(poly: &PolyMesh, options: &WriteOptions, u_max: f64) -> (f64, f64) {
@@ -274,7 +288,10 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     out.push(write_file(&fsi, "force_lumping.csv", &lumping, false)?);
 
     // Case values.
-    let inlet = poly.patch("inlet").ok_or_else(|| Error::Geometry("FSI writer: no inlet patch".into()))?;
+    let ends = EndNames::of(mesh)?;
+    let inlet = poly
+        .patch(&ends.inlet)
+        .ok_or_else(|| Error::Geometry(format!("FSI writer: no inlet patch '{}'", ends.inlet)))?;
     let inflow = inlet_velocities(&poly, inlet, &options.openfoam);
     let u_max = inflow.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
     let (dt, end) = timing(&poly, options, u_max);
@@ -284,11 +301,12 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     }
     u.push(')');
     let mut end_patches = String::new();
-    for p in poly.patches.iter().filter(|p| p.name != FLUID_PATCH) {
-        end_patches.push_str(&format!("    {}\n    {{\n        type            slip;\n    }}\n", p.name));
+    for end in ends.all() {
+        end_patches.push_str(&render(END_PIECE.0, END_PIECE.1, &[("end", end.to_string())])?);
     }
     let windows = (end / dt).round().max(1.0) as u64;
-    let vars: Vec<(&str, String)> = vec![
+    let mut vars: Vec<(&str, String)> = end_vars(&ends)?;
+    vars.extend([
         ("version", env!("CARGO_PKG_VERSION").to_string()),
         ("fluid", FLUID.into()),
         ("solid", SOLID.into()),
@@ -321,7 +339,7 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
         ("unit", unit.name().into()),
         ("n_nodes", map.nodes.len().to_string()),
         ("n_faces", map.faces.len().to_string()),
-    ];
+    ]);
     for (rel, template) in TEMPLATES {
         let text = render(&format!("templates/fsi/{rel}"), template, &vars)?;
         out.push(write_file(&fsi, rel, &text, *rel == "Allrun")?);

@@ -25,7 +25,11 @@
 //!   fix holds the ends axially (plane strain for a straight tube); the circumferential fix
 //!   removes the remaining rigid-body modes (translation across the axis and rotation about it)
 //!   without restraining the radial expansion. For a straight tube under pressure u_theta = 0
-//!   everywhere by symmetry, so the extra constraint does not change the solution.
+//!   everywhere by symmetry, so the extra constraint does not change the solution. The FSI deck
+//!   ([`super::fsi`]) removes the same motions with `*EQUATION`s in global axes instead
+//!   ([`EndHold::Equations`]), so that no node it loads is under a `*TRANSFORM`. Every end of
+//!   the mesh (`inlet`, `outlet` or `outlet_1`, `outlet_2`, ... of a branched vessel) gets its
+//!   own ring set `WALL_<END>`, held about its own centre and normal.
 //! * Load: `*DSLOAD` pressure `P` on `WALL_LUMEN` (faces S6 of the innermost wall elements):
 //!   positive pressure acts into the face, i.e. pushes the wall outward.
 //!
@@ -512,7 +516,8 @@ impl<'a> Deck<'a> {
                     let p = label_position(mesh, mids.as_ref(), label);
                     let d = p - end.centre;
                     let r = d - normal * d.dot(&normal);
-                    if !(r.norm() > 1e-9 * d.norm()) || !r.norm().is_finite() {
+                    let on_axis = r.norm() <= 1e-9 * d.norm();
+                    if on_axis || !r.norm().is_finite() {
                         return Err(Error::Geometry(format!(
                             "end '{}': ring node {label} lies on the end's axis, so it has no radial direction to move in",
                             end.name

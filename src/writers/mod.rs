@@ -80,6 +80,41 @@ pub const WRITERS: &[(&str, &str, WriterFn)] = &[
     ),
 ];
 
+/// Settings that a requested format cannot write, found before any meshing (the writers check
+/// them again when called directly): hex20 in `febio-fsi`, a quadratic CalculiX element in `fsi`,
+/// a fibre dispersion in the CalculiX decks (`calculix`, `fsi`).
+pub fn check_format_settings(config: &crate::config::MeshConfig) -> Result<()> {
+    use crate::error::Error;
+    let wants = |f: &str| config.formats.iter().any(|x| x == f);
+    if wants("febio-fsi") && config.febio.element == febio::FebioElement::Hex20 {
+        return Err(Error::Config(
+            "febio.element = \"hex20\" with format febio-fsi: the fluid-FSI deck is hex8 only (lumen and wall share \
+             every interface node); write febio-fsi in a run with element = \"hex8\""
+                .into(),
+        ));
+    }
+    if wants("fsi") && config.fe.calculix_element.is_quadratic() {
+        return Err(Error::Config(format!(
+            "fe.calculix_element = {} with format fsi: the FSI package couples bilinear faces only; use C3D8I, C3D8 \
+             or C3D8R",
+            config.fe.calculix_element.name()
+        )));
+    }
+    if (wants("calculix") || wants("fsi")) && config.fe.material == inp::MaterialModel::Hgo {
+        for region in crate::mesh::Region::WALL {
+            let kappa = config.material.layer(region).kappa;
+            if kappa != 0.0 {
+                return Err(Error::Config(format!(
+                    "material.{}.kappa = {kappa}: CalculiX's fibre material has no dispersion; set kappa = 0 or \
+                     leave out the calculix and fsi formats",
+                    region.name()
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The writer of a format name.
 pub fn writer(name: &str) -> Option<WriterFn> {
     WRITERS.iter().find(|w| w.0 == name).map(|w| w.2)

@@ -32,7 +32,10 @@
 //! `constant/turbulenceProperties` (laminar; v1912 reads this name), `Allrun`. The inlet
 //! velocity is written per inlet face ([`inlet_velocities`]): parabolic in the distance to the
 //! section boundary, or plug, scaled so that the inlet flux is exactly the flow rate asked.
-//! Outlets: zero-gradient velocity, pressure 0; wall: no-slip.
+//! Every end of the mesh is its own patch with its own entry in `0/U` and `0/p` ([`EndNames`]):
+//! the inlet (its name from the mesh), then each outlet (`outlet`, or `outlet_1`, `outlet_2`, ...
+//! of a branched vessel), each rendered from `templates/openfoam/0/{U,p}.outlet`: zero-gradient
+//! velocity, pressure 0. Wall: no-slip.
 //!
 //! A patch named `wall` of type `wall` makes OpenFOAM v1912 print a harmless "Removed patchGroup
 //! 'wall' which clashes with patch 2 of the same name" warning (the type puts every wall patch in
@@ -395,15 +398,44 @@ fn build(
     Ok(PolyMesh { points, faces, owner, neighbour, patches, cell_zones, face_zones, n_cells })
 }
 
+/// The end patches of the lumen, named as the mesh's ends: its one inlet, then every outlet in
+/// the mesh's order (`outlet`, or `outlet_1`, `outlet_2`, ... of a branched vessel).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EndNames {
+    pub inlet: String,
+    pub outlets: Vec<String>,
+}
+
+impl EndNames {
+    /// Fails unless the mesh has exactly one inlet and at least one outlet (the case drives the
+    /// flow through one inlet).
+    pub fn of(mesh: &VesselMesh) -> Result<Self> {
+        let inlets: Vec<&str> = mesh.ends.iter().filter(|e| e.is_inlet).map(|e| e.name.as_str()).collect();
+        let outlets: Vec<String> = mesh.outlets().map(|e| e.name.clone()).collect();
+        match (inlets.as_slice(), outlets.is_empty()) {
+            ([inlet], false) => Ok(EndNames { inlet: inlet.to_string(), outlets }),
+            (_, true) => Err(Error::Geometry("OpenFOAM writer: the mesh has no outlet end".into())),
+            _ => Err(Error::Geometry(format!(
+                "OpenFOAM writer: the mesh has {} inlet ends ({}); the flow case needs exactly one",
+                inlets.len(),
+                inlets.join(", ")
+            ))),
+        }
+    }
+    /// Inlet, then the outlets.
+    pub fn all(&self) -> impl Iterator<Item = &str> {
+        std::iter::once(self.inlet.as_str()).chain(self.outlets.iter().map(|s| s.as_str()))
+    }
+}
+
 /// Inlet patch then one patch per outlet, from the lumen end face sets.
-fn end_patches(mesh: &VesselMesh) -> Result<Vec<PatchSpec<'_>>> {
-    let inlet = mesh.inlet().ok_or_else(|| Error::Geometry("OpenFOAM writer: the mesh has no inlet end".into()))?;
+fn end_patches<'a>(mesh: &'a VesselMesh, ends: &EndNames) -> Result<Vec<PatchSpec<'a>>> {
     let mut specs = Vec::new();
-    for end in std::iter::once(inlet).chain(mesh.outlets()) {
+    for end in ends.all() {
         specs.push(PatchSpec {
-            name: end.name.clone(),
+            name: end.to_string(),
             kind: PatchKind::Patch,
-            faces: face_set(mesh, &sets::lumen_end(&end.name))?,
+            faces: face_set(mesh, &sets::lumen_end(end))?,
         });
     }
     Ok(specs)
@@ -411,7 +443,7 @@ fn end_patches(mesh: &VesselMesh) -> Result<Vec<PatchSpec<'_>>> {
 
 /// The polyMesh of the lumen: patches inlet, outlets, wall; cellZone lumen.
 pub fn lumen_polymesh(mesh: &VesselMesh) -> Result<PolyMesh> {
-    let mut specs = end_patches(mesh)?;
+    let mut specs = end_patches(mesh, &EndNames::of(mesh)?)?;
     specs.push(PatchSpec {
         name: "wall".into(),
         kind: PatchKind::Wall,
@@ -424,11 +456,9 @@ pub fn lumen_polymesh(mesh: &VesselMesh) -> Result<PolyMesh> {
 /// The polyMesh of lumen and wall: patches inlet, outlets, wall end rings, outer wall; cellZones
 /// per region; faceZone of the lumen-wall interface.
 pub fn fsi_polymesh(mesh: &VesselMesh) -> Result<PolyMesh> {
-    let mut specs = end_patches(mesh)?;
-    let ends: Vec<String> = std::iter::once(mesh.inlet().map(|e| e.name.clone()).unwrap_or_default())
-        .chain(mesh.outlets().map(|e| e.name.clone()))
-        .collect();
-    for end in &ends {
+    let ends = EndNames::of(mesh)?;
+    let mut specs = end_patches(mesh, &ends)?;
+    for end in ends.all() {
         let name = sets::wall_end(end);
         specs.push(PatchSpec { faces: face_set(mesh, &name)?, name, kind: PatchKind::Patch });
     }
@@ -625,6 +655,27 @@ const TEMPLATES: &[(&str, &str)] = &[
     ("Allrun", include_str!("../../templates/openfoam/Allrun")),
 ];
 const FSI_ALLRUN: &str = include_str!("../../templates/openfoam-fsi/Allrun");
+/// Per-outlet entries of the field files: placeholder in the field file, and the piece rendered
+/// once per outlet with `{{outlet}}` = the outlet's patch name.
+const OUTLET_PIECES: &[(&str, &str, &str)] = &[
+    ("outlets_U", "templates/openfoam/0/U.outlet", include_str!("../../templates/openfoam/0/U.outlet")),
+    ("outlets_p", "templates/openfoam/0/p.outlet", include_str!("../../templates/openfoam/0/p.outlet")),
+];
+
+/// The end-patch values of the field templates: `inlet` (the inlet patch's name) and one entry
+/// per outlet for each field (`outlets_U`, `outlets_p`), so that each outlet has its own boundary
+/// condition.
+pub fn end_vars(ends: &EndNames) -> Result<Vec<(&'static str, String)>> {
+    let mut vars = vec![("inlet", ends.inlet.clone())];
+    for (key, label, piece) in OUTLET_PIECES {
+        let mut text = String::new();
+        for outlet in &ends.outlets {
+            text.push_str(&render(label, piece, &[("outlet", outlet.clone())])?);
+        }
+        vars.push((*key, text));
+    }
+    Ok(vars)
+}
 
 pub use super::template::render;
 
@@ -713,8 +764,10 @@ fn min_centre_distance(poly: &PolyMesh) -> f64 {
 }
 
 /// Placeholder values of the case templates.
-fn case_vars(poly: &PolyMesh, config: &OpenFoamConfig) -> Result<Vec<(&'static str, String)>> {
-    let inlet = poly.patch("inlet").ok_or_else(|| Error::Geometry("OpenFOAM writer: no inlet patch".into()))?;
+fn case_vars(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Result<Vec<(&'static str, String)>> {
+    let inlet = poly
+        .patch(&ends.inlet)
+        .ok_or_else(|| Error::Geometry(format!("OpenFOAM writer: no inlet patch '{}'", ends.inlet)))?;
     let inflow = inlet_velocities(poly, inlet, config);
     let mut u = format!("nonuniform List<vector>\n{}\n(\n", inflow.velocities.len());
     for v in &inflow.velocities {
@@ -748,7 +801,8 @@ fn case_vars(poly: &PolyMesh, config: &OpenFoamConfig) -> Result<Vec<(&'static s
             )
         }
     };
-    Ok(vec![
+    let mut vars = end_vars(ends)?;
+    vars.extend([
         ("version", env!("CARGO_PKG_VERSION").to_string()),
         ("application", application.into()),
         ("ddt_scheme", ddt.into()),
@@ -769,14 +823,14 @@ fn case_vars(poly: &PolyMesh, config: &OpenFoamConfig) -> Result<Vec<(&'static s
         ("mean_velocity", num(inflow.flow_rate / inflow.area)),
         ("flow_rate", num(inflow.flow_rate)),
         ("inlet_velocity", u),
-    ])
+    ]);
+    Ok(vars)
 }
 
 fn write_text(case: &Path, rel: &str, text: &str, executable: bool) -> Result<PathBuf> {
     super::write_text_file(case, rel, text, executable)?;
     Ok(PathBuf::from(rel))
 }
-
 
 fn prefixed(folder: &str, paths: Vec<PathBuf>) -> Vec<PathBuf> {
     paths.into_iter().map(|p| Path::new(folder).join(p)).collect()
@@ -785,13 +839,14 @@ fn prefixed(folder: &str, paths: Vec<PathBuf>) -> Vec<PathBuf> {
 /// Writes the lumen case into `dir/openfoam/`.
 pub fn write_openfoam(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
     let poly = lumen_polymesh(mesh)?;
-    write_case(&poly, options, &dir.join("openfoam")).map(|p| prefixed("openfoam", p))
+    write_case(&poly, &EndNames::of(mesh)?, options, &dir.join("openfoam")).map(|p| prefixed("openfoam", p))
 }
 
-/// Writes a case for an already built lumen polyMesh into `case` (paths returned relative to it).
-pub fn write_case(poly: &PolyMesh, options: &WriteOptions, case: &Path) -> Result<Vec<PathBuf>> {
+/// Writes a case for an already built lumen polyMesh with the end patches `ends` into `case`
+/// (paths returned relative to it).
+pub fn write_case(poly: &PolyMesh, ends: &EndNames, options: &WriteOptions, case: &Path) -> Result<Vec<PathBuf>> {
     options.openfoam.validate()?;
-    let vars = case_vars(poly, &options.openfoam)?;
+    let vars = case_vars(poly, ends, &options.openfoam)?;
     let mut out = write_polymesh(poly, options.openfoam.binary, case)?;
     for (rel, text) in TEMPLATES {
         let rendered = render(rel, text, &vars)?;
@@ -807,7 +862,7 @@ pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path)
     let case = dir.join("openfoam-fsi");
     let mut out = write_polymesh(&poly, options.openfoam.binary, &case)?;
     let lumen = lumen_polymesh(mesh)?;
-    let vars = case_vars(&lumen, &options.openfoam)?;
+    let vars = case_vars(&lumen, &EndNames::of(mesh)?, &options.openfoam)?;
     for (rel, text) in TEMPLATES.iter().filter(|(rel, _)| rel.starts_with("system/")) {
         out.push(write_text(&case, rel, &render(rel, text, &vars)?, false)?);
     }
@@ -1013,8 +1068,9 @@ mod tests {
         assert!(e.contains("{{b}}") && e.contains("t"), "{e}");
         assert!(render("t", "x {{a", &vars).is_err());
         let poly = lumen_polymesh(&tube()).unwrap();
+        let ends = EndNames::of(&tube()).unwrap();
         for solver in [FoamSolver::SimpleFoam, FoamSolver::PimpleFoam] {
-            let vars = case_vars(&poly, &OpenFoamConfig { solver, ..Default::default() }).unwrap();
+            let vars = case_vars(&poly, &ends, &OpenFoamConfig { solver, ..Default::default() }).unwrap();
             for (rel, text) in TEMPLATES {
                 assert!(!render(rel, text, &vars).unwrap().contains("{{"), "{rel}");
             }
@@ -1073,7 +1129,10 @@ mod tests {
         let mut read = Vec::new();
         for (k, binary) in [false, true, false].into_iter().enumerate() {
             let dir = base.join(k.to_string());
-            let options = WriteOptions { openfoam: crate::config::OpenFoamConfig { binary, ..Default::default() }, ..Default::default() };
+            let options = WriteOptions {
+                openfoam: crate::config::OpenFoamConfig { binary, ..Default::default() },
+                ..Default::default()
+            };
             write_openfoam(&m, &options, &dir).unwrap();
             read.push(read_polymesh(&dir.join("openfoam")).unwrap());
         }
