@@ -4,14 +4,14 @@
 use crate::accuracy::{surface_accuracy, SurfaceAccuracy};
 use crate::annotate::annotate;
 use crate::blocks::{graded_levels, growth_ratio_for_first_cell, SectionTemplate};
+use crate::centerline::Branch;
 use crate::centerline::CenterlineTree;
 use crate::config::MeshConfig;
 use crate::error::{Error, Result};
 use crate::input::{read_centerlines, read_surface, Centerlines, TriangleSurface};
+use crate::junction::{analyse_junctions, fold_normal, signed_angle, twist_frames, FoldEnd, JunctionGeometry};
 use crate::mesh::VesselMesh;
 use crate::progress::Progress;
-use crate::centerline::Branch;
-use crate::junction::{analyse_junctions, fold_normal, signed_angle, twist_frames, FoldEnd, JunctionGeometry};
 use crate::projection::{clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
 use crate::quality::Stats;
 use crate::report::{lumen_report, wall_report, BranchReport, InputReport, JunctionReport, Report};
@@ -44,7 +44,11 @@ struct BranchPlan {
 /// Turns every branch's frames so that its template lies on the folds of its junctions: a
 /// constant turn when one end meets a junction; between two junctions, the nearest quarter turn
 /// at the downstream one and the rest spread linearly along the branch.
-fn plan_branches(tree: &CenterlineTree, junctions: &[JunctionGeometry], setup: &ProjectionSetup) -> Result<Vec<BranchPlan>> {
+fn plan_branches(
+    tree: &CenterlineTree,
+    junctions: &[JunctionGeometry],
+    setup: &ProjectionSetup,
+) -> Result<Vec<BranchPlan>> {
     tree.branches
         .iter()
         .enumerate()
@@ -75,9 +79,11 @@ fn plan_branches(tree: &CenterlineTree, junctions: &[JunctionGeometry], setup: &
                     let q = if phi0.is_some() {
                         (0..4u8)
                             .min_by(|&a, &b| {
-                                let d = |q| (turn_needed(s1, j, q) - base + std::f64::consts::PI)
-                                    .rem_euclid(std::f64::consts::TAU)
-                                    - std::f64::consts::PI;
+                                let d = |q| {
+                                    (turn_needed(s1, j, q) - base + std::f64::consts::PI)
+                                        .rem_euclid(std::f64::consts::TAU)
+                                        - std::f64::consts::PI
+                                };
                                 d(a).abs().total_cmp(&d(b).abs())
                             })
                             .unwrap()
@@ -249,11 +255,14 @@ pub fn mesh_tree(
     let w = &config.wall;
     let thickness = |r: f64| w.thickness_mm.unwrap_or(w.thickness_ratio * r);
     let names = tree.branches.iter().map(|b| b.name.clone()).collect();
-    let (mut mesh, junction_of) = build_volume(&projected, &template, &junctions, &levels, &layers, &thickness, w.growth, names, lumen_surface);
+    let (mut mesh, junction_of) =
+        build_volume(&projected, &template, &junctions, &levels, &layers, &thickness, w.growth, names, lumen_surface);
 
     progress.stage("annotation");
     annotate(&mut mesh);
-    if let Some((e, q)) = mesh.quality.iter().enumerate().find(|(_, q)| q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0) {
+    if let Some((e, q)) =
+        mesh.quality.iter().enumerate().find(|(_, q)| q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0)
+    {
         let c = crate::mesh::face_centre(&mesh.corners(e), 0);
         if let Some(j) = junction_of[e] {
             return Err(Error::Geometry(format!(
@@ -316,9 +325,8 @@ struct Staging {
 impl Staging {
     fn new(output: &Path) -> Result<Staging> {
         let created_output = !output.exists();
-        std::fs::create_dir_all(output).map_err(|e| {
-            Error::io(output, "cannot create the output folder (choose another --output)", e)
-        })?;
+        std::fs::create_dir_all(output)
+            .map_err(|e| Error::io(output, "cannot create the output folder (choose another --output)", e))?;
         let dir = output.join(format!(".vesselhex-partial-{}", std::process::id()));
         std::fs::create_dir_all(&dir)
             .map_err(|e| Error::io(output, "cannot write in the output folder (choose another --output)", e))?;
@@ -384,7 +392,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
         None => {
             let options = crate::centerline_extract::ExtractOptions::default();
             let extraction = crate::centerline_extract::extract_centerlines(&surface, &options)?;
-            (extraction.single_path()?, PathBuf::from("(computed from the surface)"))
+            (extraction.centerlines, PathBuf::from("(computed from the surface)"))
         }
     };
     let meshed = mesh_vessel(&surface, &centerlines, config, &mut progress)?;
@@ -444,7 +452,9 @@ fn build_report(
             outlet_end: end_kind(&p.end),
             elements: mesh.branch_of.iter().filter(|&&x| x as usize == p.branch).count(),
             scaled_jacobian: Stats::of(
-                (0..mesh.hexes.len()).filter(|&e| mesh.branch_of[e] as usize == p.branch).map(|e| mesh.quality[e].scaled_jacobian),
+                (0..mesh.hexes.len())
+                    .filter(|&e| mesh.branch_of[e] as usize == p.branch)
+                    .map(|e| mesh.quality[e].scaled_jacobian),
             ),
         })
         .collect();
@@ -452,7 +462,8 @@ fn build_report(
         .junctions
         .iter()
         .map(|g| {
-            let elements: Vec<usize> = (0..mesh.hexes.len()).filter(|&e| meshed.junction_of[e] == Some(g.index)).collect();
+            let elements: Vec<usize> =
+                (0..mesh.hexes.len()).filter(|&e| meshed.junction_of[e] == Some(g.index)).collect();
             JunctionReport {
                 centre: (g.centre.coords * scale).into(),
                 radius: g.radius * scale,

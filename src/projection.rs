@@ -10,8 +10,8 @@
 
 use crate::blocks::SectionTemplate;
 use crate::centerline::{Branch, CenterlineSample};
-use crate::junction::{transition_points, FoldEnd, JunctionGeometry};
 use crate::error::{Error, Result};
+use crate::junction::{transition_points, FoldEnd, JunctionGeometry, TransitionPoints};
 use crate::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -96,10 +96,7 @@ impl Probe {
 }
 
 fn where_(s: &CenterlineSample) -> String {
-    format!(
-        "at ({:.3}, {:.3}, {:.3}) mm, {:.2} mm along the centerline",
-        s.point.x, s.point.y, s.point.z, s.s
-    )
+    format!("at ({:.3}, {:.3}, {:.3}) mm, {:.2} mm along the centerline", s.point.x, s.point.y, s.point.z, s.s)
 }
 
 /// Casts rays from the core boundary of a section towards their targets. `orientation` is +1
@@ -240,10 +237,9 @@ pub fn project_branch(
         Some(_) => hi,
         None => samples[i1].s - r1 * (trim_outlet + if outlet_closed { CLOSED_END_MARGIN } else { 0.0 }),
     };
-    if let Some((bad, p)) = probes
-        .iter()
-        .find(|(i, p)| samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !p.valid())
-    {
+    if let Some((bad, p)) = probes.iter().find(|(i, p)| {
+        samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !p.valid()
+    }) {
         return Err(Error::Geometry(format!(
             "{}: the cross-section of branch {name} {} does not close: {} of {} rays miss the lumen surface and {} \
              meet it from outside. The surface may have a hole there, or the centerline leaves the lumen; repair \
@@ -319,6 +315,10 @@ pub fn project_branch(
 /// A section clears a junction when its rays all meet the wall from inside within this many
 /// local radii of the centerline (a ray that runs further has found a neighbouring branch).
 const CLEAR_REACH: f64 = 2.0;
+/// Turns of the ray set tried per clear-section test, over a quarter turn.
+const CLEAR_TURNS: usize = 12;
+/// A last ordinary section must be followed by this many clear ones, a quarter radius apart.
+const CLEAR_RUN_STEPS: usize = 8;
 /// How far beyond the estimate the search for a clear section goes, in branch radii.
 const CLEAR_SEARCH: f64 = 6.0;
 
@@ -337,15 +337,29 @@ pub fn clear_transition_length(
     let len = branch.length();
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     let at = |d: f64| branch.at(if at_start { d } else { len - d });
+    // The frames are turned afterwards to meet the junctions, so rays are tried at several
+    // turns over a quarter turn (the O-grid's period): the section must be clear whatever the
+    // final turn.
+    let spacing_angle = std::f64::consts::FRAC_PI_2 / CLEAR_TURNS as f64;
     let clear = |d: f64| {
-        let st = at(d);
-        let (probe, sec) = cast_section(setup.template, setup.surface, &st, orient);
-        probe.valid() && sec.surface.iter().all(|p| (p - st.point).norm() <= CLEAR_REACH * st.radius)
+        let base = at(d);
+        (0..CLEAR_TURNS).all(|t| {
+            let phi = spacing_angle * t as f64;
+            let f = base.frame;
+            let normal = f.normal * phi.cos() + f.binormal * phi.sin();
+            let st =
+                CenterlineSample { frame: crate::centerline::Frame::from_tangent_and_hint(f.tangent, normal), ..base };
+            let (probe, sec) = cast_section(setup.template, setup.surface, &st, orient);
+            probe.valid() && sec.surface.iter().all(|p| (p - st.point).norm() <= CLEAR_REACH * st.radius)
+        })
     };
     let step = 0.25 * r;
     let mut d = estimate;
     while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len {
-        if clear(d) && clear(d + 0.5 * r) && clear(d + r) {
+        if (0..=CLEAR_RUN_STEPS).all(|k| clear(d + k as f64 * step)) {
+            if std::env::var("VH_DEBUG").is_ok() {
+                eprintln!("clear {} d {d:.3} est {estimate:.3} r {r:.3}", branch.name);
+            }
             return Ok(d);
         }
         d += step;
@@ -418,7 +432,8 @@ fn transition(
     };
     let mut points = points;
     let fold_points = points.pop().expect("at least two transition sections");
-    let (probe, fold) = cast_rays(template, setup.surface, &sample_at(1.0, g.centre), fold_points.core, &fold_points.targets, orient);
+    let (probe, fold) =
+        cast_rays(template, setup.surface, &sample_at(1.0, g.centre), fold_points.core, &fold_points.targets, orient);
     if !probe.valid() {
         return Err(failure(1.0, &probe));
     }
@@ -433,47 +448,70 @@ fn transition(
             (p0, towards * chord, p1, g.arrival(j.fold.slot, &turned, template.core_size) * chord)
         })
         .collect();
-    let mut out = Vec::with_capacity(cells);
-    for (u, mut p) in params.iter().zip(points) {
-        // Where the branch is much narrower than the junction, the interpolated core would come
-        // close to the wall: shrink it about the section centre until every core boundary point
-        // lies at most CORE_REACH of the way from the centre to its guide.
-        let guide_at: Vec<Point3<f64>> =
-            guides.iter().map(|c| crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, *u)).collect();
-        let shrink = (0..template.ring_len())
-            .map(|k| {
-                let o = p.core[template.ring_core_index[k]] - p.centre;
-                let g = guide_at[k] - p.centre;
-                let along = o.dot(&g) / g.norm();
-                if along > 0.0 {
-                    CORE_REACH * g.norm() / along
-                } else {
-                    1.0
-                }
-            })
-            .fold(1.0, f64::min);
-        if shrink < 1.0 {
+    let length = branch.length();
+    // Where the branch's centerline bends close to the junction, the Hermite sections may cut
+    // through the wall; the second attempt moves them onto the centerline, less and less
+    // towards the fold (where the section is fixed).
+    let attempt = |follow_centerline: bool| -> std::result::Result<Vec<ProjectedSection>, Error> {
+        let mut out = Vec::with_capacity(cells);
+        for (u, p) in params.iter().zip(&points) {
+            let mut p = TransitionPoints { core: p.core.clone(), targets: vec![], centre: p.centre };
+            let shift = if follow_centerline {
+                let s = (station.s + sense * j.transition_length * u).clamp(0.0, length);
+                (branch.at(s).point - p.centre) * (1.0 - u)
+            } else {
+                Vector3::zeros()
+            };
+            p.centre += shift;
             for c in p.core.iter_mut() {
-                *c = p.centre + (*c - p.centre) * shrink;
+                *c += shift;
             }
+            // Where the branch is much narrower than the junction, the interpolated core would come
+            // close to the wall: shrink it about the section centre until every core boundary point
+            // lies at most CORE_REACH of the way from the centre to its guide.
+            let guide_at: Vec<Point3<f64>> =
+                guides.iter().map(|c| crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, *u) + shift).collect();
+            let shrink = (0..template.ring_len())
+                .map(|k| {
+                    let o = p.core[template.ring_core_index[k]] - p.centre;
+                    let g = guide_at[k] - p.centre;
+                    let along = o.dot(&g) / g.norm();
+                    if along > 0.0 {
+                        CORE_REACH * g.norm() / along
+                    } else {
+                        1.0
+                    }
+                })
+                .fold(1.0, f64::min);
+            if shrink < 1.0 {
+                for c in p.core.iter_mut() {
+                    *c = p.centre + (*c - p.centre) * shrink;
+                }
+            }
+            let targets: Vec<Point3<f64>> = guides
+                .iter()
+                .enumerate()
+                .map(|(k, _)| {
+                    let guide = guide_at[k];
+                    let origin = p.core[template.ring_core_index[k]];
+                    // A guide inside the lumen (a bulb) must not stop the ray short of the wall.
+                    let reach = (guide - origin).norm().max(template.ray_reach * g.radius) * GUIDE_SLACK;
+                    origin + (guide - origin).normalize() * (reach / RAY_SLACK)
+                })
+                .collect();
+            let (probe, section) =
+                cast_rays(template, setup.surface, &sample_at(*u, p.centre), p.core, &targets, orient);
+            if !probe.valid() {
+                return Err(failure(*u, &probe));
+            }
+            out.push(ProjectedSection { in_junction: true, ..section });
         }
-        let targets: Vec<Point3<f64>> = guides
-            .iter()
-            .enumerate()
-            .map(|(k, _)| {
-                let guide = guide_at[k];
-                let origin = p.core[template.ring_core_index[k]];
-                // A guide inside the lumen (a bulb) must not stop the ray short of the wall.
-                let reach = (guide - origin).norm().max(template.ray_reach * g.radius) * GUIDE_SLACK;
-                origin + (guide - origin).normalize() * (reach / RAY_SLACK)
-            })
-            .collect();
-        let (probe, section) = cast_rays(template, setup.surface, &sample_at(*u, p.centre), p.core, &targets, orient);
-        if !probe.valid() {
-            return Err(failure(*u, &probe));
-        }
-        out.push(ProjectedSection { in_junction: true, ..section });
-    }
+        Ok(out)
+    };
+    let mut out = match attempt(false) {
+        Ok(out) => out,
+        Err(first) => attempt(true).map_err(|_| first)?,
+    };
     out.push(ProjectedSection { in_junction: true, ..fold });
     Ok(out)
 }

@@ -10,14 +10,14 @@ use crate::blocks::SectionTemplate;
 use crate::config::WallGrowth;
 use crate::junction::{FoldKey, JunctionGeometry};
 use crate::mesh::{
-    sets, ElementFace, Hex, Region, HEX_EDGES, VesselEnd, VesselMesh, WallLayer, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER,
-    FACE_UPSTREAM,
+    sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, WallLayer, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER,
+    FACE_UPSTREAM, HEX_EDGES,
 };
 use crate::projection::{BranchEnd, ProjectedBranch};
 use crate::surface::LumenSurface;
-use rayon::prelude::*;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 
 /// Radial structure shared by all stations.
@@ -89,6 +89,8 @@ pub fn build_volume(
     let mut pool: HashMap<FoldKey, u32> = HashMap::new();
     // Per node: the section radius and ray direction it was placed with (surface nodes only).
     let mut node_radius: Vec<f64> = Vec::new();
+    // Nodes of junction sections, whose wall directions get extra smoothing.
+    let mut junction_node: Vec<bool> = Vec::new();
     let mut node_ray: Vec<Vector3<f64>> = Vec::new();
     // Inner lumen nodes of junction transitions, which the optimisation may move.
     let mut movable: Vec<bool> = Vec::new();
@@ -104,6 +106,7 @@ pub fn build_volume(
             };
             let mut ids = Vec::with_capacity(core_count + r_cells * m);
             let inner_movable = sec.in_junction && fold.is_none();
+            let in_junction = sec.in_junction;
             let mut add = |key: Option<FoldKey>, p: Point3<f64>, radius: f64, ray: Vector3<f64>, free: bool| -> u32 {
                 if let Some(key) = key {
                     if let Some(&id) = pool.get(&key) {
@@ -113,6 +116,7 @@ pub fn build_volume(
                 let id = nodes.len() as u32;
                 nodes.push(p);
                 node_radius.push(radius);
+                junction_node.push(in_junction);
                 node_ray.push(ray);
                 movable.push(free);
                 if let Some(key) = key {
@@ -168,7 +172,9 @@ pub fn build_volume(
     let mut end_tangent: HashMap<u32, Vector3<f64>> = HashMap::new();
     for (b, pb) in projected.iter().enumerate() {
         let last = pb.sections.len() - 1;
-        for (i, is_end) in [(0, matches!(pb.start, BranchEnd::Vessel { .. })), (last, matches!(pb.end, BranchEnd::Vessel { .. }))] {
+        for (i, is_end) in
+            [(0, matches!(pb.start, BranchEnd::Vessel { .. })), (last, matches!(pb.end, BranchEnd::Vessel { .. }))]
+        {
             if is_end {
                 for k in 0..m {
                     end_tangent.insert(lumen_ring(b, i, r_cells, k), pb.sections[i].station.frame.tangent);
@@ -178,7 +184,7 @@ pub fn build_volume(
     }
     let growth = match wall_growth {
         WallGrowth::Ray => None,
-        WallGrowth::Normal => Some(surface_normals(&nodes, &quads, &node_ray, &end_tangent)),
+        WallGrowth::Normal => Some(surface_normals(&nodes, &quads, &node_ray, &end_tangent, &junction_node)),
     };
 
     // Wall nodes: W levels above every lumen-surface node, in surface-node order.
@@ -252,7 +258,8 @@ pub fn build_volume(
         face_sets.insert(sets::lumen_end(name), vec![]);
         face_sets.insert(sets::wall_end(name), vec![]);
     }
-    let mut add_face = |set: String, e: usize, face: usize| face_sets.get_mut(&set).expect("declared above").push(ef(e, face));
+    let mut add_face =
+        |set: String, e: usize, face: usize| face_sets.get_mut(&set).expect("declared above").push(ef(e, face));
 
     // Elements: lumen (core + lateral) of every branch, then each wall region.
     let mut hexes: Vec<Hex> = Vec::new();
@@ -278,7 +285,9 @@ pub fn build_volume(
             let st = (&branch_nodes[b].stations[i], &branch_nodes[b].stations[i + 1]);
             let first_of_interval = hexes.len();
             for q in &core_quads {
-                hexes.push([st.0[q[0]], st.0[q[1]], st.0[q[2]], st.0[q[3]], st.1[q[0]], st.1[q[1]], st.1[q[2]], st.1[q[3]]]);
+                hexes.push([
+                    st.0[q[0]], st.0[q[1]], st.0[q[2]], st.0[q[3]], st.1[q[0]], st.1[q[1]], st.1[q[2]], st.1[q[3]],
+                ]);
             }
             for level in 0..r_cells {
                 for k in 0..m {
@@ -317,7 +326,8 @@ pub fn build_volume(
                         if w == w_cells - 1 {
                             add_face(sets::WALL_OUTER_FACES.into(), e, FACE_OUTER);
                         }
-                        for (cond, inlet, face) in [(i == 0, true, FACE_UPSTREAM), (i == last, false, FACE_DOWNSTREAM)] {
+                        for (cond, inlet, face) in [(i == 0, true, FACE_UPSTREAM), (i == last, false, FACE_DOWNSTREAM)]
+                        {
                             if let (true, Some(name)) = (cond, end_name(b, inlet)) {
                                 add_face(sets::wall_end(name), e, face);
                             }
@@ -343,8 +353,10 @@ pub fn build_volume(
         let pb = &projected[*b];
         let i = if *is_inlet { 0 } else { pb.sections.len() - 1 };
         node_sets.insert(sets::lumen_end(name), branch_nodes[*b].stations[i].clone());
-        let wall: Vec<u32> =
-            (r_cells..=r_cells + w_cells).flat_map(|l| (0..m).map(move |k| (l, k))).map(|(l, k)| ring(*b, i, l, k)).collect();
+        let wall: Vec<u32> = (r_cells..=r_cells + w_cells)
+            .flat_map(|l| (0..m).map(move |k| (l, k)))
+            .map(|(l, k)| ring(*b, i, l, k))
+            .collect();
         node_sets.insert(sets::wall_end(name), wall);
         let station = &pb.sections[i].station;
         let t = station.frame.tangent;
@@ -448,7 +460,7 @@ const CROTCH_PROBE: f64 = 2.5;
 /// converge there, do not cross.
 const CROTCH_SHARE: f64 = 0.4;
 /// Share of the distance at which converging growth directions meet that the wall may take.
-const CONVERGENCE_SHARE: f64 = 0.5;
+const CONVERGENCE_SHARE: f64 = 0.15;
 
 /// Wall thickness at every lumen-surface node: the nominal one, limited in flow dividers (the
 /// tissue between two branches) to a share of the distance across, and eased towards the
@@ -511,6 +523,8 @@ fn crotch_limited_thickness(
 /// Passes of neighbour averaging of the wall directions: enough to calm the voxel ripples of
 /// segmented surfaces, few enough to keep the shape.
 const NORMAL_SMOOTHING_PASSES: usize = 3;
+/// Further passes over the nodes of junction transitions.
+const JUNCTION_SMOOTHING_PASSES: usize = 30;
 
 /// Outward unit normals of the meshed lumen surface at its nodes: the sum of the adjacent
 /// quads' normals, smoothed over the quad mesh (a node counts twice, each neighbour once; a node
@@ -522,6 +536,7 @@ fn surface_normals(
     quads: &[[u32; 4]],
     rays: &[Vector3<f64>],
     end_tangent: &HashMap<u32, Vector3<f64>>,
+    junction_node: &[bool],
 ) -> HashMap<u32, Vector3<f64>> {
     let mut normal: BTreeMap<u32, Vector3<f64>> = BTreeMap::new();
     let mut neighbours: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
@@ -549,6 +564,22 @@ fn surface_normals(
     for _ in 0..NORMAL_SMOOTHING_PASSES {
         let prev = normal.clone();
         for (id, v) in normal.iter_mut() {
+            let nb = &neighbours[id];
+            let mut sum = prev[id] * (2.0 + 4usize.saturating_sub(nb.len()) as f64);
+            for j in nb {
+                sum += prev[j];
+            }
+            *v = unit(sum, prev[id]);
+        }
+    }
+    // Across a flow divider the normal turns fast; grown along it unsmoothed, the outer wall
+    // layers shear. Junction nodes get more passes.
+    for _ in 0..JUNCTION_SMOOTHING_PASSES {
+        let prev = normal.clone();
+        for (id, v) in normal.iter_mut() {
+            if !junction_node[*id as usize] {
+                continue;
+            }
             let nb = &neighbours[id];
             let mut sum = prev[id] * (2.0 + 4usize.saturating_sub(nb.len()) as f64);
             for j in nb {

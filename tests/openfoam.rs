@@ -685,3 +685,34 @@ fn every_end_of_a_multi_outlet_mesh_is_its_own_patch_with_its_own_conditions() {
     }
     cleanup(&dir);
 }
+
+/// Branched vessels: the bundled Y-bifurcation and T-junction, at two presets, and the real
+/// aorto-iliac bifurcation: checkMesh says `Mesh OK.` with no `***` line, ASCII and binary alike,
+/// and every outlet is its own patch.
+#[test]
+fn checkmesh_accepts_branched_vessels() {
+    if !openfoam_available("checkmesh_accepts_branched_vessels") {
+        return;
+    }
+    let dir = common::crate_dir().join("fixtures");
+    for name in ["y_bifurcation", "t_junction"] {
+        for preset in [Preset::Coarse, Preset::Medium] {
+            let mesh = common::mesh_files(
+                &dir.join(format!("{name}.stl")),
+                &dir.join(format!("{name}_centerlines.vtp")),
+                &MeshConfig::preset(preset),
+            );
+            assert_eq!(mesh.outlets().count(), 2);
+            check_ascii_and_binary(&mesh, &format!("{name}-{preset:?}"));
+        }
+    }
+    if let Some(v) = common::vessels_dir() {
+        let d = v.join("vmtk_aortoiliac");
+        let mesh = common::mesh_files(
+            &d.join("aorta-surface-open-ends.stl"),
+            &d.join("aorta-centerline.vtp"),
+            &MeshConfig::preset(Preset::Coarse),
+        );
+        check_ascii_and_binary(&mesh, "vmtk_aortoiliac");
+    }
+}

@@ -82,10 +82,7 @@ pub struct ExtractOptions {
 
 impl Default for ExtractOptions {
     fn default() -> Self {
-        ExtractOptions {
-            inlet: InletChoice::Largest,
-            ends: vec![],
-        }
+        ExtractOptions { inlet: InletChoice::Largest, ends: vec![] }
     }
 }
 
@@ -102,23 +99,6 @@ pub struct Extraction {
     pub notes: Vec<String>,
 }
 
-impl Extraction {
-    /// The single inlet-outlet path of a vessel with two ends, as the mesher takes it today.
-    pub fn single_path(&self) -> Result<Centerlines> {
-        match self.centerlines.polylines.len() {
-            1 => Ok(self.centerlines.clone()),
-            n => Err(Error::input(
-                &self.centerlines.source,
-                format!(
-                    "has {} ends (1 inlet, {n} outlets): meshing branching vessels is not available yet; \
-                     `vesselhex centerlines` writes all {n} paths",
-                    n + 1
-                ),
-            )),
-        }
-    }
-}
-
 /// Computes the centerlines of a lumen surface (millimetres). Never panics on bad geometry:
 /// failures (too few ends, an end not connected to the inlet) are errors naming the fix.
 pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) -> Result<Extraction> {
@@ -128,9 +108,7 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
     let mut triangles = surface.triangles.clone();
     let flipped = topology::orient_consistently(&mut triangles);
     if flipped > 0 {
-        notes.push(format!(
-            "{flipped} triangles wound against their neighbours were flipped"
-        ));
+        notes.push(format!("{flipped} triangles wound against their neighbours were flipped"));
     }
 
     // Take flat caps off, remembering which vertices they held.
@@ -149,46 +127,24 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
     if !caps.is_empty() {
         notes.push(format!("{} flat caps removed", caps.len()));
     }
-    let open: Vec<[u32; 3]> = triangles
-        .iter()
-        .zip(&in_cap)
-        .filter(|(_, c)| !**c)
-        .map(|(t, _)| *t)
-        .collect();
+    let open: Vec<[u32; 3]> = triangles.iter().zip(&in_cap).filter(|(_, c)| !**c).map(|(t, _)| *t).collect();
     let loops = topology::boundary_loops(&open);
     let mut found = ends::loop_ends(vertices, &loops, &cap_tag_of_vertex);
     if found.len() < loops.len() {
-        notes.push(format!(
-            "{} small boundary loops ignored as holes",
-            loops.len() - found.len()
-        ));
+        notes.push(format!("{} small boundary loops ignored as holes", loops.len() - found.len()));
     }
 
     // Inward vertex normals: the winding's sign from the volume closed by fans on every loop.
-    let sign = if topology::signed_volume6(vertices, &open, &loops) > 0.0 {
-        -1.0
-    } else {
-        1.0
-    };
-    let inward: Vec<_> = topology::vertex_normals(vertices, &open)
-        .into_iter()
-        .map(|n| n * sign)
-        .collect();
+    let sign = if topology::signed_volume6(vertices, &open, &loops) > 0.0 { -1.0 } else { 1.0 };
+    let inward: Vec<_> = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
     let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
     let (lo, hi) = lumen.bounding_box();
     let balls = medial::shrinking_balls(vertices, &inward, (hi - lo).norm());
     let mut graph = BallGraph::new(&balls);
 
     // Ends as graph nodes: loop centres are added; given points use their vertex's ball.
-    let mut end_nodes: Vec<u32> = found
-        .iter()
-        .map(|e| {
-            graph.add_end(Ball {
-                centre: e.centre,
-                radius: e.radius,
-            })
-        })
-        .collect();
+    let mut end_nodes: Vec<u32> =
+        found.iter().map(|e| graph.add_end(Ball { centre: e.centre, radius: e.radius })).collect();
     for p in &options.ends {
         if found.iter().any(|e| (e.centre - p).norm() < SAME_END * e.radius) {
             continue;
@@ -200,12 +156,7 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
             .ok_or_else(|| Error::input(source, "the surface has no triangles"))?;
         let node = tri
             .iter()
-            .filter_map(|&v| {
-                Some((
-                    (vertices[v as usize] - hit.point).norm(),
-                    graph.node_of_vertex[v as usize]?,
-                ))
-            })
+            .filter_map(|&v| Some(((vertices[v as usize] - hit.point).norm(), graph.node_of_vertex[v as usize]?)))
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .map(|(_, n)| n)
             .ok_or_else(|| {
@@ -218,11 +169,7 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
                 )
             })?;
         let ball = graph.nodes[node as usize];
-        found.push(VesselEnd {
-            centre: ball.centre,
-            radius: ball.radius,
-            kind: EndKind::Given,
-        });
+        found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Given });
         end_nodes.push(node);
     }
     if found.len() < 2 {
@@ -275,22 +222,9 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
         let (points, radii) = smooth_path(&balls, &lumen);
         let mut cell_tags = IndexMap::new();
         cell_tags.insert("CenterlineIds".to_string(), polylines.len() as i64);
-        polylines.push(CenterlinePolyline {
-            points,
-            radii: Some(radii),
-            normals: None,
-            cell_tags,
-        });
+        polylines.push(CenterlinePolyline { points, radii: Some(radii), normals: None, cell_tags });
     }
-    Ok(Extraction {
-        centerlines: Centerlines {
-            polylines,
-            source: source.clone(),
-        },
-        ends: found,
-        inlet,
-        notes,
-    })
+    Ok(Extraction { centerlines: Centerlines { polylines, source: source.clone() }, ends: found, inlet, notes })
 }
 
 /// Resamples a chain of balls at [`STEP_FRACTION`] of its small radii, smooths it with a
@@ -311,11 +245,7 @@ fn smooth_path(balls: &[Ball], lumen: &LumenSurface) -> (Vec<Point3<f64>>, Vec<f
         if i + 1 >= balls.len() {
             return (balls[balls.len() - 1].centre, balls[balls.len() - 1].radius);
         }
-        let w = if s[i + 1] > s[i] {
-            ((t - s[i]) / (s[i + 1] - s[i])).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
+        let w = if s[i + 1] > s[i] { ((t - s[i]) / (s[i + 1] - s[i])).clamp(0.0, 1.0) } else { 0.0 };
         (
             balls[i].centre + (balls[i + 1].centre - balls[i].centre) * w,
             balls[i].radius * (1.0 - w) + balls[i + 1].radius * w,
