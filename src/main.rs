@@ -92,6 +92,13 @@ struct MeshArgs {
     /// Worker threads (default: all cores). The output does not depend on it.
     #[arg(long)]
     threads: Option<usize>,
+    /// Without --centerlines: the inlet of the computed centerlines, auto (the largest end) or
+    /// x,y,z (the end nearest this point, in --units).
+    #[arg(long, default_value = "auto")]
+    inlet: String,
+    /// Without --centerlines: extra end points x,y,z (in --units), for rounded caps.
+    #[arg(long, num_args = 1..)]
+    ends: Vec<String>,
 }
 
 #[derive(Args)]
@@ -198,9 +205,18 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<()> {
             .build_global()
             .map_err(|e| vesselhex::Error::Config(format!("--threads {n}: {e}")))?;
     }
+    let scale = config.units.to_mm();
+    let extraction = vesselhex::centerline_extract::ExtractOptions {
+        inlet: match args.inlet.as_str() {
+            "auto" => vesselhex::centerline_extract::InletChoice::Largest,
+            point => vesselhex::centerline_extract::InletChoice::Nearest(parse_point(point, scale)?),
+        },
+        ends: args.ends.iter().map(|e| parse_point(e, scale)).collect::<vesselhex::Result<Vec<_>>>()?,
+    };
     let request = MeshRequest {
         surface: args.surface,
         centerlines: args.centerlines,
+        extraction,
         centerline_units: args.centerline_units,
         config,
         output: args.output.clone(),

@@ -306,6 +306,8 @@ pub struct MeshRequest {
     pub centerlines: Option<PathBuf>,
     /// Unit of the centerline file when it differs from the surface's.
     pub centerline_units: Option<crate::units::LengthUnit>,
+    /// How to compute the centerlines when none are given (inlet, extra ends).
+    pub extraction: crate::centerline_extract::ExtractOptions,
     pub config: MeshConfig,
     pub output: PathBuf,
     pub quiet: bool,
@@ -390,8 +392,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let (centerlines, centerline_path) = match &request.centerlines {
         Some(path) => (read_centerlines(path, request.centerline_units.unwrap_or(config.units))?, path.clone()),
         None => {
-            let options = crate::centerline_extract::ExtractOptions::default();
-            let extraction = crate::centerline_extract::extract_centerlines(&surface, &options)?;
+            let extraction = crate::centerline_extract::extract_centerlines(&surface, &request.extraction)?;
             (extraction.centerlines, PathBuf::from("(computed from the surface)"))
         }
     };
