@@ -38,7 +38,6 @@ const MAX_BRANCHES: usize = 5;
 #[derive(Debug, Clone)]
 pub struct JunctionSlot {
     pub branch: usize,
-    pub name: String,
     /// The branch that ends at the junction (the others start there).
     pub is_parent: bool,
     /// Unit direction from the centre into the branch, projected normal to the axis.
@@ -87,11 +86,6 @@ impl JunctionGeometry {
     pub fn describe(&self, tree: &CenterlineTree) -> String {
         let names: Vec<&str> = self.slots.iter().map(|s| tree.branches[s.branch].name.as_str()).collect();
         format!("the junction at {} (branches {})", describe_point(&self.centre), names.join(", "))
-    }
-
-    /// The slot of a branch given by its samples' end point (the tree's index is not at hand).
-    pub fn slot_of_branch(&self, branch: &Branch) -> usize {
-        self.slots.iter().position(|s| s.name == branch.name).expect("branch belongs to the junction")
     }
 
     pub fn slot_of(&self, branch: usize) -> usize {
@@ -300,7 +294,6 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
             let p = (d - axis * d.dot(&axis)).normalize();
             JunctionSlot {
                 branch,
-                name: tree.branches[branch].name.clone(),
                 is_parent,
                 direction: p,
                 angle: signed_angle(&reference, &p, &axis).rem_euclid(TAU),
@@ -442,8 +435,7 @@ pub fn transition_points(
         (p0, t0, p1, t1)
     };
     let core_curves: Vec<_> = template.core.iter().map(curve).collect();
-    let target_curves: Vec<_> =
-        template.target_dir.iter().map(|d| curve(&(d * template.ray_reach))).collect();
+    let target_curves: Vec<_> = template.target_dir.iter().map(|d| curve(&(d * template.ray_reach))).collect();
     let centre_curve = curve(&Vector2::zeros());
     params
         .iter()

@@ -58,7 +58,8 @@ fn plan_branches(
             let at_junction = |j: Option<usize>, at_start: bool| -> Result<Option<(usize, usize, f64)>> {
                 j.map(|j| {
                     let g = &junctions[j];
-                    Ok((j, g.slot_of(b), clear_transition_length(g, &branch, at_start, setup)?))
+                    let slot = g.slot_of(b);
+                    Ok((j, slot, clear_transition_length(g, slot, &branch, at_start, setup)?))
                 })
                 .transpose()
             };
@@ -264,25 +265,20 @@ pub fn mesh_tree(
         mesh.quality.iter().enumerate().find(|(_, q)| q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0)
     {
         let c = crate::mesh::face_centre(&mesh.corners(e), 0);
-        if let Some(j) = junction_of[e] {
-            return Err(Error::Geometry(format!(
-                "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm, in {}, is inverted (scaled Jacobian {:.3}): the \
-                 junction's transition folds there (a narrow crotch or a small branch on a large vessel); reduce \
-                 wall.thickness_ratio or mesh finer",
-                surface.source.display(),
-                e + 1,
-                mesh.regions[e].name(),
-                c.x,
-                c.y,
-                c.z,
-                junctions[j].describe(&tree),
-                q.scaled_jacobian
-            )));
-        }
+        let (place, cause) = match junction_of[e] {
+            Some(j) => (
+                format!(", in {},", junctions[j].describe(&tree)),
+                "the junction's transition folds there (a narrow crotch or a small branch on a large vessel); \
+                 reduce wall.thickness_ratio or mesh finer",
+            ),
+            None => (
+                String::new(),
+                "the vessel bends too sharply for the cross-sections, or the wall is too thick there. Increase \
+                 centerline.smoothing_passes, reduce wall.thickness_ratio or lumen.axial_spacing",
+            ),
+        };
         return Err(Error::Geometry(format!(
-            "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm is inverted (scaled Jacobian {:.3}): the vessel bends \
-             too sharply for the cross-sections, or the wall is too thick there. Increase \
-             centerline.smoothing_passes, reduce wall.thickness_ratio or lumen.axial_spacing",
+            "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm{place} is inverted (scaled Jacobian {:.3}): {cause}",
             surface.source.display(),
             e + 1,
             mesh.regions[e].name(),

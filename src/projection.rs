@@ -327,11 +327,11 @@ const CLEAR_SEARCH: f64 = 6.0;
 /// until the section and the next radius of the branch are clear of the other branches.
 pub fn clear_transition_length(
     geometry: &JunctionGeometry,
+    slot: usize,
     branch: &Branch,
     at_start: bool,
     setup: &ProjectionSetup,
 ) -> Result<f64> {
-    let slot = geometry.slot_of_branch(branch);
     let estimate = crate::junction::transition_length(geometry, slot);
     let r = geometry.slots[slot].radius;
     let len = branch.length();

@@ -271,12 +271,12 @@ pub fn build_volume(
         if !(pb.sections[i].in_junction || pb.sections[i + 1].in_junction) {
             return None;
         }
-        match (pb.start, pb.end) {
-            (BranchEnd::Fold(f), _) if i < pb.sections.len() / 2 => Some(f.junction),
-            (_, BranchEnd::Fold(f)) => Some(f.junction),
-            (BranchEnd::Fold(f), _) => Some(f.junction),
-            _ => None,
-        }
+        // The nearer end's junction first (a branch between two junctions has both).
+        let ends = if i < pb.sections.len() / 2 { [pb.start, pb.end] } else { [pb.end, pb.start] };
+        ends.iter().find_map(|e| match e {
+            BranchEnd::Fold(f) => Some(f.junction),
+            BranchEnd::Vessel { .. } => None,
+        })
     };
     let core_quads = template.core_quads();
     for (b, pb) in projected.iter().enumerate() {
@@ -488,13 +488,9 @@ fn crotch_limited_thickness(
         })
         .collect();
     let index: HashMap<u32, usize> = surface_nodes.iter().enumerate().map(|(i, &s)| (s, i)).collect();
-    let mut neighbours: Vec<Vec<usize>> = vec![vec![]; surface_nodes.len()];
-    for q in quads {
-        for c in 0..4 {
-            neighbours[index[&q[c]]].push(index[&q[(c + 1) % 4]]);
-            neighbours[index[&q[c]]].push(index[&q[(c + 3) % 4]]);
-        }
-    }
+    let by_node = quad_neighbours(quads);
+    let neighbours: Vec<Vec<usize>> =
+        surface_nodes.iter().map(|s| by_node[s].iter().map(|n| index[n]).collect()).collect();
     // Where neighbouring growth directions converge (a ridge seen from the lumen: the flow
     // divider), the grown lines meet at distance |dp|^2 / -(dn . dp): keep the wall well short.
     let mut factor = factor;
@@ -520,6 +516,23 @@ fn crotch_limited_thickness(
     nominal.iter().zip(factor).map(|(t, f)| t * f).collect()
 }
 
+/// The edge neighbours of every lumen-surface node on the quad mesh, sorted, each once.
+fn quad_neighbours(quads: &[[u32; 4]]) -> BTreeMap<u32, Vec<u32>> {
+    let mut neighbours: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    for q in quads {
+        for c in 0..4 {
+            let nb = neighbours.entry(q[c]).or_default();
+            nb.push(q[(c + 1) % 4]);
+            nb.push(q[(c + 3) % 4]);
+        }
+    }
+    for nb in neighbours.values_mut() {
+        nb.sort_unstable();
+        nb.dedup();
+    }
+    neighbours
+}
+
 /// Passes of neighbour averaging of the wall directions: enough to calm the voxel ripples of
 /// segmented surfaces, few enough to keep the shape.
 const NORMAL_SMOOTHING_PASSES: usize = 3;
@@ -539,7 +552,7 @@ fn surface_normals(
     junction_node: &[bool],
 ) -> HashMap<u32, Vector3<f64>> {
     let mut normal: BTreeMap<u32, Vector3<f64>> = BTreeMap::new();
-    let mut neighbours: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    let neighbours = quad_neighbours(quads);
     for q in quads {
         let p = q.map(|i| nodes[i as usize]);
         // circumferential x axial = outward
@@ -548,36 +561,17 @@ fn surface_normals(
         let v = a.cross(&b);
         for c in 0..4 {
             *normal.entry(q[c]).or_insert_with(Vector3::zeros) += v;
-            let nb = neighbours.entry(q[c]).or_default();
-            nb.push(q[(c + 1) % 4]);
-            nb.push(q[(c + 3) % 4]);
         }
-    }
-    for nb in neighbours.values_mut() {
-        nb.sort_unstable();
-        nb.dedup();
     }
     let unit = |v: Vector3<f64>, fallback: Vector3<f64>| if v.norm() > 0.0 { v.normalize() } else { fallback };
     for (id, v) in normal.iter_mut() {
         *v = unit(*v, rays[*id as usize]);
     }
-    for _ in 0..NORMAL_SMOOTHING_PASSES {
+    // One pass of neighbour averaging over the nodes `selected` accepts.
+    let smooth = |normal: &mut BTreeMap<u32, Vector3<f64>>, selected: &dyn Fn(u32) -> bool| {
         let prev = normal.clone();
         for (id, v) in normal.iter_mut() {
-            let nb = &neighbours[id];
-            let mut sum = prev[id] * (2.0 + 4usize.saturating_sub(nb.len()) as f64);
-            for j in nb {
-                sum += prev[j];
-            }
-            *v = unit(sum, prev[id]);
-        }
-    }
-    // Across a flow divider the normal turns fast; grown along it unsmoothed, the outer wall
-    // layers shear. Junction nodes get more passes.
-    for _ in 0..JUNCTION_SMOOTHING_PASSES {
-        let prev = normal.clone();
-        for (id, v) in normal.iter_mut() {
-            if !junction_node[*id as usize] {
+            if !selected(*id) {
                 continue;
             }
             let nb = &neighbours[id];
@@ -587,6 +581,14 @@ fn surface_normals(
             }
             *v = unit(sum, prev[id]);
         }
+    };
+    for _ in 0..NORMAL_SMOOTHING_PASSES {
+        smooth(&mut normal, &|_| true);
+    }
+    // Across a flow divider the normal turns fast; grown along it unsmoothed, the outer wall
+    // layers shear. Junction nodes get more passes.
+    for _ in 0..JUNCTION_SMOOTHING_PASSES {
+        smooth(&mut normal, &|id| junction_node[id as usize]);
     }
     for (id, t) in end_tangent {
         let v = normal[id];
