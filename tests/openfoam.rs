@@ -427,14 +427,22 @@ fn allrun(case: &Path, solver: &str) -> (String, f64) {
     (log, seconds)
 }
 
+/// The flux out of the case through a patch at the latest time: the sum of the solver's face
+/// fluxes `phi` on it (negative for inflow).
+fn patch_flux(case: &Path, poly: &PolyMesh, name: &str) -> f64 {
+    let phi = latest_time(case).join("phi");
+    read_scalar_field(&phi, poly.n_cells, Some((name, poly.patch(name).unwrap().size))).iter().sum()
+}
+
+/// The outlet patches of a written lumen case, in patch order.
+fn outlet_patches(poly: &PolyMesh) -> Vec<&vesselhex::writers::openfoam::Patch> {
+    poly.patches.iter().filter(|p| p.name.starts_with("outlet")).collect()
+}
+
 /// Relative difference of the fluxes through the inlet and all outlets at the latest time.
 fn flow_imbalance(case: &Path, poly: &PolyMesh) -> f64 {
-    let phi = latest_time(case).join("phi");
-    let sum = |name: &str| {
-        read_scalar_field(&phi, poly.n_cells, Some((name, poly.patch(name).unwrap().size))).iter().sum::<f64>()
-    };
-    let q_in = -sum("inlet");
-    let q_out: f64 = poly.patches.iter().filter(|p| p.name.starts_with("outlet")).map(|p| sum(&p.name)).sum();
+    let q_in = -patch_flux(case, poly, "inlet");
+    let q_out: f64 = outlet_patches(poly).iter().map(|p| patch_flux(case, poly, &p.name)).sum();
     (q_in - q_out).abs() / q_in
 }
 
@@ -715,4 +723,245 @@ fn checkmesh_accepts_branched_vessels() {
         );
         check_ascii_and_binary(&mesh, "vmtk_aortoiliac");
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Flow through branched vessels
+
+/// A branched fixture meshed at the coarse preset, its case written by the `openfoam` writer and
+/// run through the case's own Allrun (checkMesh, then simpleFoam).
+struct BranchedRun {
+    dir: PathBuf,
+    case: PathBuf,
+    poly: PolyMesh,
+    log: String,
+    seconds: f64,
+    iterations: usize,
+}
+
+/// simpleFoam's iteration cap for the branched runs: the template's residual criteria stop it
+/// well before (a coarse branched lumen converges in under 200 SIMPLEC iterations); a case that
+/// has not converged by then fails the test instead of running the default 2000.
+const BRANCHED_ITERATIONS: usize = 500;
+
+fn run_branched_fixture(name: &str) -> BranchedRun {
+    let fixtures = common::crate_dir().join("fixtures");
+    let mesh = common::mesh_files(
+        &fixtures.join(format!("{name}.stl")),
+        &fixtures.join(format!("{name}_centerlines.vtp")),
+        &MeshConfig::preset(Preset::Coarse),
+    );
+    let dir = scratch(&format!("{name}-flow"));
+    let mut options = WriteOptions::default();
+    options.openfoam.iterations = BRANCHED_ITERATIONS;
+    let case = write(&mesh, "openfoam", &options, &dir);
+    let poly = read_polymesh(&case).unwrap();
+    let outlets: Vec<&str> = outlet_patches(&poly).iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(outlets, ["outlet_1", "outlet_2"], "{name}: one patch per outlet");
+    let (log, seconds) = allrun(&case, "simpleFoam");
+    let tail = &log[log.len().saturating_sub(3000)..];
+    assert!(!log.contains("FOAM FATAL") && log.lines().any(|l| l.trim() == "End"), "{name}: simpleFoam:\n{tail}");
+    let iterations = log
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("SIMPLE solution converged in "))
+        .and_then(|rest| rest.split_whitespace().next()?.parse().ok())
+        .unwrap_or_else(|| panic!("{name}: simpleFoam did not converge in {BRANCHED_ITERATIONS} iterations:\n{tail}"));
+    BranchedRun { dir, case, poly, log, seconds, iterations }
+}
+
+/// The residual criteria of the written `system/fvSolution` (SIMPLE/residualControl): field ->
+/// tolerance.
+fn residual_control(case: &Path) -> Vec<(String, f64)> {
+    let t = tokens(&std::fs::read_to_string(case.join("system/fvSolution")).unwrap());
+    let start = t.iter().position(|x| x == "residualControl").unwrap() + 2;
+    let end = start + t[start..].iter().position(|x| x == "}").unwrap();
+    t[start..end].chunks(3).map(|e| (e[0].clone(), e[1].parse().unwrap())).collect()
+}
+
+/// The initial residuals of the last iteration in a simpleFoam log: field (`Ux`, `p`, ...) ->
+/// the largest initial residual of its solves in that iteration.
+fn last_initial_residuals(log: &str) -> Vec<(String, f64)> {
+    let last = log.rfind("\nTime = ").expect("no iteration in the log");
+    let mut out: Vec<(String, f64)> = Vec::new();
+    for line in log[last..].lines() {
+        let Some((_, rest)) = line.split_once("Solving for ") else { continue };
+        let field = rest.split(',').next().unwrap().to_string();
+        let value: f64 = rest
+            .split("Initial residual = ")
+            .nth(1)
+            .and_then(|v| v.split(',').next()?.trim().parse().ok())
+            .unwrap_or_else(|| panic!("cannot read {line}"));
+        match out.iter_mut().find(|(f, _)| *f == field) {
+            Some(e) => e.1 = e.1.max(value),
+            None => out.push((field, value)),
+        }
+    }
+    out
+}
+
+/// The initial residuals of the last iteration are below the case's own residual criteria (a
+/// vector's criterion holds for each of its components).
+fn assert_residuals_below_criteria(run: &BranchedRun, name: &str) -> Vec<(String, f64)> {
+    let criteria = residual_control(&run.case);
+    assert_eq!(criteria.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(), ["p", "U"]);
+    let residuals = last_initial_residuals(&run.log);
+    for field in ["Ux", "Uy", "Uz", "p"] {
+        let value = residuals.iter().find(|r| r.0 == field).unwrap_or_else(|| panic!("{name}: no {field} solve")).1;
+        let limit = criteria.iter().find(|c| field.starts_with(&c.0)).unwrap().1;
+        assert!(value < limit, "{name}: last initial residual of {field} {value:e} >= {limit:e}");
+    }
+    residuals
+}
+
+/// Area-weighted mean over a patch of the pressure in its cells (a zero-gradient patch's value).
+fn patch_cell_pressure(poly: &PolyMesh, p: &[f64], name: &str) -> f64 {
+    let patch = poly.patch(name).unwrap();
+    let area: f64 = patch.range().map(|f| poly.face_area(f).norm()).sum();
+    patch.range().map(|f| poly.face_area(f).norm() * p[poly.owner[f] as usize]).sum::<f64>() / area
+}
+
+/// Area, area-weighted centre and unit outward normal of a patch.
+fn patch_disc(poly: &PolyMesh, name: &str) -> (f64, nalgebra::Point3<f64>, nalgebra::Vector3<f64>) {
+    let patch = poly.patch(name).unwrap();
+    let area_vector: nalgebra::Vector3<f64> = patch.range().map(|f| poly.face_area(f)).sum();
+    let area: f64 = patch.range().map(|f| poly.face_area(f).norm()).sum();
+    let centre =
+        patch.range().map(|f| poly.face_centre(f).coords * poly.face_area(f).norm()).sum::<nalgebra::Vector3<f64>>()
+            / area;
+    (area, nalgebra::Point3::from(centre), area_vector.normalize())
+}
+
+/// The symmetric Y bifurcation (fixtures/y_bifurcation: parent R = 2 mm, daughters 1.6 mm at 30
+/// degrees either side), coarse preset, its case as written: laminar simpleFoam with the parabolic
+/// inflow at 0.1 m/s (Re about 110 in the parent), both outlets at p = 0.
+///
+/// Bounds:
+/// * residuals: the last iteration's initial residuals below the case's residual criteria (p 1e-6,
+///   U 1e-7, read from the written fvSolution), reached within [`BRANCHED_ITERATIONS`];
+/// * mass balance, inflow against the sum of the outflows: 1e-6 relative. Each cell's continuity
+///   holds to the pressure solve's residual and the cell sums telescope to the boundary fluxes,
+///   so a converged run balances to far better than the p criterion; 1e-6 is the bound of the
+///   unbranched runs, and a lost or double-counted outlet would be off by tens of percent;
+/// * split: each outlet carries 0.5 +- 0.005 of the outflow. The fixture is mirror-symmetric in
+///   x; the mesh is not (the daughters are meshed one after the other and the junction's cells
+///   are not mirror images), but its halves x > 0 and x < 0 hold the same volume and its outlets
+///   the same area within 1e-3 (asserted first). A daughter's Poiseuille resistance goes with
+///   L / A^2, so geometric differences of that order move the split by the same order; 1 % between
+///   the outlets leaves a margin of ten for the junction's cells, while a wrong outlet condition
+///   (an outlet without its p = 0, or taking no flow) would be far outside it;
+/// * pressure: the inlet pressure (cells at the inlet, area-weighted) above the pressure of every
+///   cell at either outlet, and within 0.7 to 1.3 times the drop of Poiseuille flow in series:
+///   parent from its inlet to the junction (where the axes meet) at the full flow, then a
+///   daughter from the junction to its outlet at its own measured flow, each at the radius of its
+///   end's area. The estimate counts the tubes up to the junction's centre, where the lumen is
+///   wider than either tube (the true drop is lower), and ignores the daughters' developing flow
+///   (entrance length about 0.06 Re D = 13 mm at their Re about 70: the true drop is higher); a
+///   unit or sign error, or flow through the wrong patch, gives a drop far outside.
+#[test]
+fn simplefoam_converges_on_the_symmetric_y_with_balanced_mass_and_an_even_split() {
+    if !openfoam_available("simplefoam_converges_on_the_symmetric_y_with_balanced_mass_and_an_even_split") {
+        return;
+    }
+    let run = run_branched_fixture("y_bifurcation");
+    let poly = &run.poly;
+    let residuals = assert_residuals_below_criteria(&run, "y_bifurcation");
+
+    // The mesh's own asymmetry: halves' volumes and outlets' areas.
+    let centres = poly.cell_centres();
+    let mut half_volume = [0.0f64; 2];
+    for f in 0..poly.faces.len() {
+        // Divergence theorem per cell: V = sum over its faces of (centre . area) / 3.
+        let v = poly.face_centre(f).coords.dot(&poly.face_area(f)) / 3.0;
+        let owner = poly.owner[f] as usize;
+        half_volume[usize::from(centres[owner].x < 0.0)] += v;
+        if f < poly.n_internal() {
+            let neighbour = poly.neighbour[f] as usize;
+            half_volume[usize::from(centres[neighbour].x < 0.0)] -= v;
+        }
+    }
+    let volume_asymmetry = (half_volume[0] - half_volume[1]).abs() / (half_volume[0] + half_volume[1]);
+    let (area_1, centre_1, _) = patch_disc(poly, "outlet_1");
+    let (area_2, centre_2, _) = patch_disc(poly, "outlet_2");
+    let area_asymmetry = (area_1 - area_2).abs() / (area_1 + area_2);
+    assert!(volume_asymmetry < 1e-3 && area_asymmetry < 1e-3, "{volume_asymmetry:e} {area_asymmetry:e}");
+    assert!(centre_1.x * centre_2.x < 0.0, "the outlets are not on either side of x = 0");
+
+    // Mass balance and split.
+    let q_in = -patch_flux(&run.case, poly, "inlet");
+    let q = [patch_flux(&run.case, poly, "outlet_1"), patch_flux(&run.case, poly, "outlet_2")];
+    let (area_in, centre_in, normal_in) = patch_disc(poly, "inlet");
+    let wanted = WriteOptions::default().openfoam.mean_velocity * area_in;
+    assert!((q_in - wanted).abs() < 1e-9 * wanted, "inflow {q_in} vs asked {wanted}");
+    let imbalance = (q_in - q[0] - q[1]).abs() / q_in;
+    assert!(imbalance < 1e-6, "inflow {q_in} vs outflows {q:?}");
+    let share = q[0] / (q[0] + q[1]);
+    assert!((share - 0.5).abs() < 0.005, "outlet_1 takes {:.4} of the flow", share);
+
+    // Pressure: from the inlet down to the outlets, against Poiseuille in series.
+    let p = read_scalar_field(&latest_time(&run.case).join("p"), poly.n_cells, None);
+    let p_inlet = patch_cell_pressure(poly, &p, "inlet");
+    let p_outlet_max = ["outlet_1", "outlet_2"]
+        .iter()
+        .flat_map(|name| poly.patch(name).unwrap().range())
+        .map(|f| p[poly.owner[f] as usize])
+        .fold(f64::MIN, f64::max);
+    assert!(p_inlet > p_outlet_max && p_outlet_max > 0.0, "inlet {p_inlet} vs outlet cells up to {p_outlet_max}");
+    let nu = WriteOptions::default().openfoam.nu;
+    let poiseuille =
+        |length: f64, flow: f64, area: f64| 8.0 * std::f64::consts::PI * nu * length * flow / (area * area);
+    // The junction: the point of the parent's axis nearest to a daughter's axis (the outlet's
+    // centre along its normal); both daughters meet it there by symmetry.
+    let junction = |centre: nalgebra::Point3<f64>, normal: nalgebra::Vector3<f64>| {
+        let w = centre_in - centre;
+        let (b, d, e) = (normal_in.dot(&normal), normal_in.dot(&w), normal.dot(&w));
+        centre_in + normal_in * ((b * e - d) / (1.0 - b * b))
+    };
+    let daughters = [("outlet_1", q[0]), ("outlet_2", q[1])].map(|(name, flow)| {
+        let (area, centre, normal) = patch_disc(poly, name);
+        let j = junction(centre, normal);
+        (j, poiseuille((centre - j).norm(), flow, area))
+    });
+    let parent_length = (daughters[0].0 - centre_in).norm();
+    let expected = poiseuille(parent_length, q_in, area_in) + 0.5 * (daughters[0].1 + daughters[1].1);
+    let ratio = p_inlet / expected;
+
+    eprintln!(
+        "y_bifurcation: {} cells; converged in {} iterations, last initial residuals {residuals:?}; \
+         inflow {q_in:.9e} m3/s, outflows {:.9e} + {:.9e}, imbalance {imbalance:.2e}; split {share:.5} / {:.5}; \
+         mesh asymmetry: volume {volume_asymmetry:.1e}, outlet area {area_asymmetry:.1e}; inlet p {p_inlet:.6e} m2/s2 \
+         = {ratio:.3} x Poiseuille in series {expected:.6e} (parent {:.2} mm); Allrun {:.1} s",
+        poly.n_cells,
+        run.iterations,
+        q[0],
+        q[1],
+        1.0 - share,
+        1e3 * parent_length,
+        run.seconds
+    );
+    assert!((0.7..1.3).contains(&ratio), "inlet pressure {p_inlet} is {ratio} x the Poiseuille estimate {expected}");
+    cleanup(&run.dir);
+}
+
+/// The T junction (fixtures/t_junction: parent R = 2 mm straight through, side branch R = 1 mm at
+/// 90 degrees), coarse preset, its case as written: simpleFoam converges below the case's residual
+/// criteria and the inflow equals the sum of the two outflows within 1e-6 (the bound and reason of
+/// the Y's test); both outlets take flow out of the case.
+#[test]
+fn simplefoam_converges_on_the_t_junction_with_balanced_mass() {
+    if !openfoam_available("simplefoam_converges_on_the_t_junction_with_balanced_mass") {
+        return;
+    }
+    let run = run_branched_fixture("t_junction");
+    let residuals = assert_residuals_below_criteria(&run, "t_junction");
+    let q_in = -patch_flux(&run.case, &run.poly, "inlet");
+    let q = [patch_flux(&run.case, &run.poly, "outlet_1"), patch_flux(&run.case, &run.poly, "outlet_2")];
+    let imbalance = (q_in - q[0] - q[1]).abs() / q_in;
+    eprintln!(
+        "t_junction: {} cells; converged in {} iterations, last initial residuals {residuals:?}; inflow {q_in:.9e} \
+         m3/s, outflows {:.9e} (parent) + {:.9e} (branch), imbalance {imbalance:.2e}; Allrun {:.1} s",
+        run.poly.n_cells, run.iterations, q[0], q[1], run.seconds
+    );
+    assert!(q_in > 0.0 && q[0] > 0.0 && q[1] > 0.0, "inflow {q_in}, outflows {q:?}");
+    assert!(imbalance < 1e-6, "inflow {q_in} vs outflows {q:?}");
+    cleanup(&run.dir);
 }
