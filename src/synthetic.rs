@@ -28,11 +28,11 @@
 //! and [`AnalyticVessel::distance_to_wall`] gives the exact distance those tests compare against.
 
 use crate::error::{Error, Result};
+use crate::writers::write_atomic;
 use nalgebra::{Point3, Vector3};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use std::fmt;
-use std::fs::{self, File};
-use std::io::{BufWriter, Write};
+use std::fs;
 use std::path::{Path, PathBuf};
 
 /// Spacing of the centerline points written to `<name>_centerline.csv` (the actual spacing is
@@ -888,35 +888,37 @@ fn fmt_coord(x: f64) -> String {
     }
 }
 
-/// The 80-byte binary STL header (never starting with `solid`, which readers take for ASCII).
-fn stl_header<V: AnalyticVessel + ?Sized>(v: &V) -> [u8; 80] {
-    let text = format!(
-        "vesselhex synthetic fixture {}: mm, {} normals, caps {:?}",
-        v.name(),
-        v.facing(),
-        v.caps()
-    );
-    let mut header = [b' '; 80];
-    let n = text.len().min(80);
-    header[..n].copy_from_slice(&text.as_bytes()[..n]);
-    header
+/// The text of the binary STL header (never starting with `solid`, which readers take for ASCII).
+fn stl_header<V: AnalyticVessel + ?Sized>(v: &V) -> String {
+    format!("vesselhex synthetic fixture {}: mm, {} normals, caps {:?}", v.name(), v.facing(), v.caps())
 }
 
-/// Binary STL of a triangulation: per triangle the unit normal of its winding, then the three
-/// vertices, as f32 little-endian, and a zero attribute word.
-fn stl_bytes(header: &[u8; 80], vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(84 + 50 * triangles.len());
-    out.extend_from_slice(header);
-    out.extend_from_slice(&(triangles.len() as u32).to_le_bytes());
-    for t in triangles {
-        let [a, b, c] = t.map(|i| vertices[i as usize]);
-        let normal = (b - a).cross(&(c - a)).normalize();
-        for x in normal.iter().chain(a.iter()).chain(b.iter()).chain(c.iter()) {
-            out.extend_from_slice(&(*x as f32).to_le_bytes());
+/// Writes a triangulation atomically as a binary STL (f32 little-endian): the 80-byte header
+/// (`header` padded with spaces or cut), the count, then per triangle the unit normal of its
+/// winding and its three vertices, and a zero attribute word. Used by the unbranched and the
+/// branching fixtures alike.
+pub(crate) fn write_binary_stl(
+    path: &Path,
+    header: &str,
+    vertices: &[Point3<f64>],
+    triangles: &[[u32; 3]],
+) -> Result<()> {
+    let mut head = [b' '; 80];
+    let n = header.len().min(80);
+    head[..n].copy_from_slice(&header.as_bytes()[..n]);
+    write_atomic(path, |w| {
+        w.write_all(&head)?;
+        w.write_all(&(triangles.len() as u32).to_le_bytes())?;
+        for t in triangles {
+            let [a, b, c] = t.map(|i| vertices[i as usize]);
+            let normal = (b - a).cross(&(c - a)).normalize();
+            for x in normal.iter().chain(a.iter()).chain(b.iter()).chain(c.iter()) {
+                w.write_all(&(*x as f32).to_le_bytes())?;
+            }
+            w.write_all(&0u16.to_le_bytes())?;
         }
-        out.extend_from_slice(&0u16.to_le_bytes());
-    }
-    out
+        Ok(())
+    })
 }
 
 /// CSV `x,y,z,r` of the exact centerline at [`centerline_abscissae`].
@@ -931,21 +933,6 @@ fn centerline_csv<V: AnalyticVessel + ?Sized>(v: &V) -> String {
     out
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same directory, renamed when
-/// complete, so a reader never sees a partial file.
-fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    let write = || -> std::io::Result<()> {
-        let mut f = BufWriter::new(File::create(&tmp)?);
-        f.write_all(bytes)?;
-        f.into_inner().map_err(|e| e.into_error())?.sync_all()
-    };
-    write().map_err(|e| Error::io(&tmp, "writing fixture", e))?;
-    fs::rename(&tmp, path).map_err(|e| Error::io(path, "renaming fixture into place", e))
-}
-
 /// Writes `<name>.stl` (binary, at the fixture's [`AnalyticVessel::resolution`]) and
 /// `<name>_centerline.csv` (header `x,y,z,r`) into `dir`, creating it if needed.
 /// The output is deterministic (same bytes on every run on a given platform).
@@ -954,8 +941,8 @@ pub fn write_fixture<V: AnalyticVessel + ?Sized>(v: &V, dir: &Path) -> Result<()
     let res = v.resolution();
     let (vertices, triangles) = triangulate(v, res.circumferential, res.axial_step_mm);
     let (stl, csv) = fixture_paths(v.name(), dir);
-    write_atomically(&stl, &stl_bytes(&stl_header(v), &vertices, &triangles))?;
-    write_atomically(&csv, centerline_csv(v).as_bytes())
+    write_binary_stl(&stl, &stl_header(v), &vertices, &triangles)?;
+    write_atomic(&csv, |w| w.write_all(centerline_csv(v).as_bytes()))
 }
 
 /// Writes every fixture of [`all_fixtures`] into `dir`; returns the files written (STL then

@@ -49,7 +49,7 @@
 use crate::centerline_extract::write_vtp;
 use crate::error::{Error, Result};
 use crate::input::{CenterlinePolyline, Centerlines};
-use crate::writers::write_atomic;
+use crate::synthetic::write_binary_stl;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -1475,26 +1475,6 @@ pub struct WrittenFixture {
     pub centerline_data: Centerlines,
 }
 
-/// Binary STL (f32 little-endian): 80-byte header, count, then per triangle the unit normal of
-/// its winding and its three vertices, and a zero attribute word.
-fn stl_bytes(header: &str, vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(84 + 50 * triangles.len());
-    let mut head = [b' '; 80];
-    let n = header.len().min(80);
-    head[..n].copy_from_slice(&header.as_bytes()[..n]);
-    out.extend_from_slice(&head);
-    out.extend_from_slice(&(triangles.len() as u32).to_le_bytes());
-    for t in triangles {
-        let [a, b, c] = t.map(|i| vertices[i as usize]);
-        let normal = (b - a).cross(&(c - a)).normalize();
-        for x in normal.iter().chain(a.iter()).chain(b.iter()).chain(c.iter()) {
-            out.extend_from_slice(&(*x as f32).to_le_bytes());
-        }
-        out.extend_from_slice(&0u16.to_le_bytes());
-    }
-    out
-}
-
 /// Generates `fixture` and writes `<name>.stl` (binary) and `<name>_centerlines.vtp` into `dir`
 /// (created if needed), each atomically. Deterministic: same bytes on every run and thread count.
 pub fn write_branching_fixture(fixture: &BranchingFixture, dir: &Path) -> Result<WrittenFixture> {
@@ -1507,8 +1487,7 @@ pub fn write_branching_fixture(fixture: &BranchingFixture, dir: &Path) -> Result
         fixture.name,
         fixture.openings().len()
     );
-    let bytes = stl_bytes(&header, &surface.vertices, &surface.triangles);
-    write_atomic(&stl, |w| w.write_all(&bytes))?;
+    write_binary_stl(&stl, &header, &surface.vertices, &surface.triangles)?;
     write_vtp(&centerline_data, 1.0, &centerlines)?;
     Ok(WrittenFixture {
         stl,

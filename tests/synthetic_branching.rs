@@ -8,12 +8,13 @@ use nalgebra::{Point3, Vector3};
 use std::collections::{HashMap, HashSet};
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 use std::time::Instant;
 use vesselhex::input::{read_centerlines, read_surface_with_report, Centerlines};
 use vesselhex::surface::LumenSurface;
 use vesselhex::synthetic_branching::{
     branching_fixture_paths, default_branching_fixtures, min_angle_deg, write_all_branching_fixtures,
-    write_branching_fixture, BranchingFixture, Opening, TJunction, YBifurcation,
+    write_branching_fixture, BranchingFixture, BranchingSurface, Opening, TJunction, YBifurcation,
 };
 use vesselhex::units::LengthUnit;
 use vesselhex::Error;
@@ -61,9 +62,33 @@ fn read_stl(path: &Path) -> Mesh {
     }
 }
 
-fn committed(fixture: &BranchingFixture) -> (Mesh, Centerlines) {
-    let (stl, vtp) = branching_fixture_paths(&fixture.name, &fixtures_dir());
-    (read_stl(&stl), read_centerlines(&vtp, LengthUnit::Mm).unwrap())
+/// The committed fixtures as the mesher reads them: each default fixture with its STL and VTP.
+fn committed_fixtures() -> Vec<(BranchingFixture, Mesh, Centerlines)> {
+    default_branching_fixtures()
+        .unwrap()
+        .into_iter()
+        .map(|fixture| {
+            let (stl, vtp) = branching_fixture_paths(&fixture.name, &fixtures_dir());
+            let (mesh, centerlines) = (read_stl(&stl), read_centerlines(&vtp, LengthUnit::Mm).unwrap());
+            (fixture, mesh, centerlines)
+        })
+        .collect()
+}
+
+/// The default fixtures with their surfaces as generated (f64), generated once for all the tests
+/// of this file.
+fn generated_fixtures() -> &'static [(BranchingFixture, BranchingSurface)] {
+    static GENERATED: OnceLock<Vec<(BranchingFixture, BranchingSurface)>> = OnceLock::new();
+    GENERATED.get_or_init(|| {
+        default_branching_fixtures()
+            .unwrap()
+            .into_iter()
+            .map(|fixture| {
+                let surface = fixture.generate_surface().unwrap();
+                (fixture, surface)
+            })
+            .collect()
+    })
 }
 
 /// Largest distance f32 storage can move a vertex at `p`: half an ulp per coordinate.
@@ -213,6 +238,22 @@ fn assert_open_ends_only(name: &str, mesh: &Mesh, openings: &[Opening]) {
     );
 }
 
+/// What every written surface must be: [`assert_open_ends_only`], and no triangle angle under 5°.
+/// Returns the smallest angle (degrees).
+fn assert_sound_surface(name: &str, mesh: &Mesh, openings: &[Opening]) -> f64 {
+    assert_open_ends_only(name, mesh, openings);
+    let worst = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+            min_angle_deg(&a, &b, &c)
+        })
+        .fold(f64::INFINITY, f64::min);
+    assert!(worst > 5.0, "{name}: a triangle angle of {worst}°");
+    worst
+}
+
 /// The mesh closed by a fan over each boundary loop (to its centroid), as a LumenSurface.
 fn capped(mesh: &Mesh) -> LumenSurface {
     let topo = topology(mesh);
@@ -290,13 +331,12 @@ fn regenerated_fixtures_are_byte_identical_to_the_committed_ones() {
 
 #[test]
 fn committed_files_are_small_and_read_back() {
-    for fixture in default_branching_fixtures().unwrap() {
+    for (fixture, _, centerlines) in committed_fixtures() {
         let (stl, vtp) = branching_fixture_paths(&fixture.name, &fixtures_dir());
         for path in [&stl, &vtp] {
             let size = fs::metadata(path).unwrap().len();
             assert!(size < 2_000_000, "{}: {size} bytes", path.display());
         }
-        let (_, centerlines) = committed(&fixture);
         let openings = fixture.openings();
         assert_eq!(
             centerlines.polylines.len(),
@@ -344,10 +384,9 @@ fn committed_files_are_small_and_read_back() {
 
 #[test]
 fn vertices_lie_on_the_analytic_surface() {
-    for fixture in default_branching_fixtures().unwrap() {
+    for ((fixture, surface), (_, mesh, _)) in generated_fixtures().iter().zip(committed_fixtures()) {
         let f = fixture.lumen_function();
         // In f64, as generated: on F = 0 to 1e-12 relative (first-order distance |F| / |∇F|).
-        let surface = fixture.generate_surface().unwrap();
         let worst = surface
             .vertices
             .iter()
@@ -359,7 +398,6 @@ fn vertices_lie_on_the_analytic_surface() {
             fixture.name
         );
         // As committed: within f32 rounding of it.
-        let (mesh, _) = committed(&fixture);
         for p in &mesh.vertices {
             let d = f.distance_estimate(p);
             assert!(
@@ -376,8 +414,7 @@ fn vertices_lie_on_the_analytic_surface() {
 /// the tube's radius from its axis (a check of the implicit function against plain geometry).
 #[test]
 fn far_from_the_junction_the_surface_is_the_exact_tube() {
-    for fixture in default_branching_fixtures().unwrap() {
-        let surface = fixture.generate_surface().unwrap();
+    for (fixture, surface) in generated_fixtures() {
         let mut checked = 0;
         for o in fixture.openings() {
             let t = &fixture.tubes[o.tube];
@@ -409,18 +446,8 @@ fn far_from_the_junction_the_surface_is_the_exact_tube() {
 
 #[test]
 fn committed_surfaces_are_manifold_with_one_open_loop_per_end() {
-    for fixture in default_branching_fixtures().unwrap() {
-        let (mesh, _) = committed(&fixture);
-        assert_open_ends_only(&fixture.name, &mesh, &fixture.openings());
-        let worst = mesh
-            .triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
-                min_angle_deg(&a, &b, &c)
-            })
-            .fold(f64::INFINITY, f64::min);
-        assert!(worst > 5.0, "{}: a triangle angle of {worst}°", fixture.name);
+    for (fixture, mesh, _) in committed_fixtures() {
+        let worst = assert_sound_surface(&fixture.name, &mesh, &fixture.openings());
         println!(
             "{}: {} triangles, {} vertices, smallest angle {worst:.1}°",
             fixture.name,
@@ -432,9 +459,8 @@ fn committed_surfaces_are_manifold_with_one_open_loop_per_end() {
 
 #[test]
 fn normals_point_out_of_the_lumen_and_the_volume_matches() {
-    for fixture in default_branching_fixtures().unwrap() {
+    for (fixture, mesh, _) in committed_fixtures() {
         let f = fixture.lumen_function();
-        let (mesh, _) = committed(&fixture);
         // Every triangle faces the way F grows.
         for t in &mesh.triangles {
             let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
@@ -477,8 +503,7 @@ fn normals_point_out_of_the_lumen_and_the_volume_matches() {
 
 #[test]
 fn centerline_points_are_inside_and_radii_match_the_surface() {
-    for fixture in default_branching_fixtures().unwrap() {
-        let (mesh, centerlines) = committed(&fixture);
+    for (fixture, mesh, centerlines) in committed_fixtures() {
         let closed = capped(&mesh);
         let open = LumenSurface::from_parts(mesh.vertices.clone(), mesh.triangles.clone(), "open".into()).unwrap();
         let openings = fixture.openings();
@@ -577,9 +602,8 @@ fn centerline_points_are_inside_and_radii_match_the_surface() {
 /// above the branch's radius where the branch's axis runs through the junction.
 #[test]
 fn junction_radius_is_the_inscribed_sphere() {
-    for fixture in default_branching_fixtures().unwrap() {
-        let surface = fixture.generate_surface().unwrap();
-        let lines = fixture.centerlines(&surface).unwrap();
+    for (fixture, surface) in generated_fixtures() {
+        let lines = fixture.centerlines(surface).unwrap();
         let openings = fixture.openings();
         for (line, o) in lines.polylines.iter().zip(&openings[1..]) {
             let radii = line.radii.as_ref().unwrap();
@@ -632,18 +656,9 @@ fn a_sweep_of_angles_and_ratios_gives_manifold_outward_surfaces() {
                 let seconds = start.elapsed().as_secs_f64();
                 let mesh = read_stl(&written.stl);
                 let openings = fixture.openings();
-                assert_open_ends_only(&fixture.name, &mesh, &openings);
+                let worst = assert_sound_surface(&fixture.name, &mesh, &openings);
                 let volume = signed_volume(&capped(&mesh));
                 assert!(volume > 0.0, "{}: volume {volume}", fixture.name);
-                let worst = mesh
-                    .triangles
-                    .iter()
-                    .map(|t| {
-                        let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
-                        min_angle_deg(&a, &b, &c)
-                    })
-                    .fold(f64::INFINITY, f64::min);
-                assert!(worst > 5.0, "{}: a triangle angle of {worst}°", fixture.name);
                 // Each tube is at least free_length_radii of its radii long past its separation.
                 for o in &openings {
                     assert!(o.length - o.separation >= fixture.free_length_radii * o.radius - 1e-9);
