@@ -6,6 +6,7 @@
 //! never used: they are undefined on straight parts and flip at inflection points, which would
 //! twist the O-grid blocks and shear the elements.
 
+mod junction_centre;
 mod rooted;
 pub(crate) mod skeleton;
 
@@ -191,7 +192,10 @@ impl CenterlineTree {
         let tags: Vec<_> = centerlines.polylines.iter().map(|l| l.cell_tags.clone()).collect();
         let skeleton = Skeleton::from_lines(lines, &tags, path)?;
         let inlet = choose_inlet(&skeleton, inlet_point, path)?;
-        let rooted = hang(skeleton, inlet, config.junction_merge_radii, path)?;
+        let mut rooted = hang(skeleton, inlet, config.junction_merge_radii, path)?;
+        if let Some(surface) = surface {
+            junction_centre::centre_junctions(&mut rooted, surface);
+        }
         assemble(&rooted, config)
     }
 }

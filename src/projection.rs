@@ -319,6 +319,13 @@ const CLEAR_REACH: f64 = 2.0;
 const CLEAR_TURNS: usize = 12;
 /// A last ordinary section must be followed by this many clear ones, a quarter radius apart.
 const CLEAR_RUN_STEPS: usize = 8;
+/// How far the folded end's wall points must lie ahead of the last ordinary section, in radii.
+const FOLD_MARGIN: f64 = 0.25;
+/// Largest curvature of the centerline where ordinary sections may stand, times the radius
+/// (a radius of curvature of two vessel radii).
+const MAX_BEND: f64 = 0.5;
+/// Length over which the curvature is measured, in radii.
+const BEND_BASE: f64 = 1.0;
 /// How far beyond the estimate the search for a clear section goes, in branch radii.
 const CLEAR_SEARCH: f64 = 6.0;
 
@@ -341,6 +348,29 @@ pub fn clear_transition_length(
     // turns over a quarter turn (the O-grid's period): the section must be clear whatever the
     // final turn.
     let spacing_angle = std::f64::consts::FRAC_PI_2 / CLEAR_TURNS as f64;
+    // Ordinary sections are planes across the centerline: where it bends on a radius of
+    // curvature near the vessel's radius (it often swings towards the junction centre in its
+    // last radius or two), neighbouring sections cross on the inner side of the bend.
+    let gentle_bend = |d: f64| {
+        let half = 0.5 * BEND_BASE * r;
+        let (a, b) = (at(d - half).frame.tangent, at(d + half).frame.tangent);
+        a.angle(&b) * r / (2.0 * half) <= MAX_BEND
+    };
+    // The folded end lies on the slot's two pages and the spine: where those meet the wall (the
+    // crotches and the spine's ends) must lie ahead of the last ordinary section, or the
+    // transition would run backwards there and fold over itself.
+    let (page_a, page_b) = geometry.side_pages(slot);
+    let fold_wall = [
+        geometry.centre + geometry.pages[page_a].dir * geometry.pages[page_a].depth,
+        geometry.centre + geometry.pages[page_b].dir * geometry.pages[page_b].depth,
+        geometry.centre + geometry.axis * geometry.spine_up,
+        geometry.centre - geometry.axis * geometry.spine_down,
+    ];
+    let fold_ahead = |d: f64| {
+        let st = at(d);
+        let towards = if at_start { -st.frame.tangent } else { st.frame.tangent };
+        fold_wall.iter().all(|w| (w - st.point).dot(&towards) >= FOLD_MARGIN * r)
+    };
     let clear = |d: f64| {
         let base = at(d);
         (0..CLEAR_TURNS).all(|t| {
@@ -351,15 +381,13 @@ pub fn clear_transition_length(
                 CenterlineSample { frame: crate::centerline::Frame::from_tangent_and_hint(f.tangent, normal), ..base };
             let (probe, sec) = cast_section(setup.template, setup.surface, &st, orient);
             probe.valid() && sec.surface.iter().all(|p| (p - st.point).norm() <= CLEAR_REACH * st.radius)
-        })
+        }) && gentle_bend(d)
+            && fold_ahead(d)
     };
     let step = 0.25 * r;
     let mut d = estimate;
     while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len {
         if (0..=CLEAR_RUN_STEPS).all(|k| clear(d + k as f64 * step)) {
-            if std::env::var("VH_DEBUG").is_ok() {
-                eprintln!("clear {} d {d:.3} est {estimate:.3} r {r:.3}", branch.name);
-            }
             return Ok(d);
         }
         d += step;
@@ -380,6 +408,26 @@ pub fn clear_transition_length(
 /// Largest share of the way from a transition section's centre to its wall that the core
 /// may take.
 const CORE_REACH: f64 = 0.7;
+
+/// The factor (at most 1) by which a transition core must shrink about its centre so that each
+/// boundary node lies at most CORE_REACH of the way from the centre to the wall in its direction.
+fn wall_clearance_shrink(surface: &LumenSurface, p: &TransitionPoints, template: &SectionTemplate) -> f64 {
+    template
+        .ring_core_index
+        .iter()
+        .map(|&c| {
+            let o = p.core[c] - p.centre;
+            let along = o.norm();
+            if along == 0.0 {
+                return 1.0;
+            }
+            match surface.first_hit(&p.centre, &(o / along), along / CORE_REACH) {
+                Some(hit) => CORE_REACH * hit.distance / along,
+                None => 1.0,
+            }
+        })
+        .fold(1.0, f64::min)
+}
 
 /// Rays of a transition section may run this many times the distance to their guide point.
 const GUIDE_SLACK: f64 = 3.0;
@@ -482,7 +530,8 @@ fn transition(
                         1.0
                     }
                 })
-                .fold(1.0, f64::min);
+                .fold(1.0, f64::min)
+                .min(wall_clearance_shrink(setup.surface, &p, template));
             if shrink < 1.0 {
                 for c in p.core.iter_mut() {
                     *c = p.centre + (*c - p.centre) * shrink;

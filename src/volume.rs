@@ -18,7 +18,7 @@ use crate::surface::LumenSurface;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 
 /// Radial structure shared by all stations.
 #[derive(Debug, Clone)]
@@ -182,24 +182,15 @@ pub fn build_volume(
             }
         }
     }
-    let growth = match wall_growth {
-        WallGrowth::Ray => None,
-        WallGrowth::Normal => Some(surface_normals(&nodes, &quads, &node_ray, &end_tangent, &junction_node)),
-    };
-
     // Wall nodes: W levels above every lumen-surface node, in surface-node order.
-    let mut surface_nodes: Vec<u32> = quads.iter().flatten().copied().collect();
-    surface_nodes.sort_unstable();
-    surface_nodes.dedup();
-    let dirs: Vec<Vector3<f64>> = surface_nodes
-        .iter()
-        .map(|s| match &growth {
-            Some(normals) => normals[s],
-            None => node_ray[*s as usize],
-        })
-        .collect();
+    let graph = SurfaceGraph::new(&quads, nodes.len());
+    let dirs: Vec<Vector3<f64>> = match wall_growth {
+        WallGrowth::Ray => graph.nodes.iter().map(|&s| node_ray[s as usize]).collect(),
+        WallGrowth::Normal => surface_normals(&nodes, &quads, &graph, &node_ray, &end_tangent, &junction_node),
+    };
+    let surface_nodes = &graph.nodes;
     let nominal: Vec<f64> = surface_nodes.iter().map(|&s| wall_thickness(node_radius[s as usize])).collect();
-    let thickness = crotch_limited_thickness(&nodes, &surface_nodes, &dirs, &quads, surface, &nominal);
+    let thickness = crotch_limited_thickness(&nodes, &graph, &dirs, surface, &nominal);
     let mut wall_base = vec![u32::MAX; nodes.len()];
     for ((&s, dir), thickness) in surface_nodes.iter().zip(&dirs).zip(thickness) {
         let p = nodes[s as usize];
@@ -467,13 +458,13 @@ const CONVERGENCE_SHARE: f64 = 0.15;
 /// limited nodes over their neighbours so the outer wall stays smooth.
 fn crotch_limited_thickness(
     nodes: &[Point3<f64>],
-    surface_nodes: &[u32],
+    graph: &SurfaceGraph,
     dirs: &[Vector3<f64>],
-    quads: &[[u32; 4]],
     surface: &LumenSurface,
     nominal: &[f64],
 ) -> Vec<f64> {
-    let factor: Vec<f64> = surface_nodes
+    let mut factor: Vec<f64> = graph
+        .nodes
         .par_iter()
         .zip(dirs)
         .zip(nominal)
@@ -487,17 +478,12 @@ fn crotch_limited_thickness(
             }
         })
         .collect();
-    let index: HashMap<u32, usize> = surface_nodes.iter().enumerate().map(|(i, &s)| (s, i)).collect();
-    let by_node = quad_neighbours(quads);
-    let neighbours: Vec<Vec<usize>> =
-        surface_nodes.iter().map(|s| by_node[s].iter().map(|n| index[n]).collect()).collect();
     // Where neighbouring growth directions converge (a ridge seen from the lumen: the flow
     // divider), the grown lines meet at distance |dp|^2 / -(dn . dp): keep the wall well short.
-    let mut factor = factor;
-    for (i, nb) in neighbours.iter().enumerate() {
-        let p = nodes[surface_nodes[i] as usize];
+    for (i, nb) in graph.neighbours.iter().enumerate() {
+        let p = nodes[graph.nodes[i] as usize];
         for &j in nb {
-            let dp = nodes[surface_nodes[j] as usize] - p;
+            let dp = nodes[graph.nodes[j] as usize] - p;
             let dn = dirs[j] - dirs[i];
             let closing = -dn.dot(&dp);
             if closing > 0.0 {
@@ -508,7 +494,7 @@ fn crotch_limited_thickness(
     }
     for _ in 0..4 {
         let prev = factor.clone();
-        for (i, nb) in neighbours.iter().enumerate() {
+        for (i, nb) in graph.neighbours.iter().enumerate() {
             let mean = nb.iter().map(|&j| prev[j]).sum::<f64>() / nb.len() as f64;
             factor[i] = prev[i].min(0.5 * (prev[i] + mean));
         }
@@ -516,21 +502,38 @@ fn crotch_limited_thickness(
     nominal.iter().zip(factor).map(|(t, f)| t * f).collect()
 }
 
-/// The edge neighbours of every lumen-surface node on the quad mesh, sorted, each once.
-fn quad_neighbours(quads: &[[u32; 4]]) -> BTreeMap<u32, Vec<u32>> {
-    let mut neighbours: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
-    for q in quads {
-        for c in 0..4 {
-            let nb = neighbours.entry(q[c]).or_default();
-            nb.push(q[(c + 1) % 4]);
-            nb.push(q[(c + 3) % 4]);
+/// The lumen surface's quad mesh as a graph: its nodes (sorted ids) and, by position in that
+/// list, each node's edge neighbours (sorted, each once).
+struct SurfaceGraph {
+    nodes: Vec<u32>,
+    /// Position in `nodes` of every mesh node, `usize::MAX` off the surface.
+    position: Vec<usize>,
+    neighbours: Vec<Vec<usize>>,
+}
+
+impl SurfaceGraph {
+    fn new(quads: &[[u32; 4]], node_count: usize) -> Self {
+        let mut nodes: Vec<u32> = quads.iter().flatten().copied().collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        let mut position = vec![usize::MAX; node_count];
+        for (i, &s) in nodes.iter().enumerate() {
+            position[s as usize] = i;
         }
+        let mut neighbours: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
+        for q in quads {
+            for c in 0..4 {
+                let nb = &mut neighbours[position[q[c] as usize]];
+                nb.push(position[q[(c + 1) % 4] as usize]);
+                nb.push(position[q[(c + 3) % 4] as usize]);
+            }
+        }
+        for nb in &mut neighbours {
+            nb.sort_unstable();
+            nb.dedup();
+        }
+        SurfaceGraph { nodes, position, neighbours }
     }
-    for nb in neighbours.values_mut() {
-        nb.sort_unstable();
-        nb.dedup();
-    }
-    neighbours
 }
 
 /// Passes of neighbour averaging of the wall directions: enough to calm the voxel ripples of
@@ -539,20 +542,20 @@ const NORMAL_SMOOTHING_PASSES: usize = 3;
 /// Further passes over the nodes of junction transitions.
 const JUNCTION_SMOOTHING_PASSES: usize = 30;
 
-/// Outward unit normals of the meshed lumen surface at its nodes: the sum of the adjacent
-/// quads' normals, smoothed over the quad mesh (a node counts twice, each neighbour once; a node
-/// with fewer than four neighbours, on an end ring, counts itself in their place). At the
-/// vessel's end rings the axial component is removed so the wall's end rings stay in the end
-/// planes.
+/// Outward unit normals of the meshed lumen surface at its nodes, by position in the graph: the
+/// sum of the adjacent quads' normals, smoothed over the quad mesh (a node counts twice, each
+/// neighbour once; a node with fewer than four neighbours, on an end ring, counts itself in
+/// their place). At the vessel's end rings the axial component is removed so the wall's end
+/// rings stay in the end planes.
 fn surface_normals(
     nodes: &[Point3<f64>],
     quads: &[[u32; 4]],
+    graph: &SurfaceGraph,
     rays: &[Vector3<f64>],
     end_tangent: &HashMap<u32, Vector3<f64>>,
     junction_node: &[bool],
-) -> HashMap<u32, Vector3<f64>> {
-    let mut normal: BTreeMap<u32, Vector3<f64>> = BTreeMap::new();
-    let neighbours = quad_neighbours(quads);
+) -> Vec<Vector3<f64>> {
+    let mut normal = vec![Vector3::zeros(); graph.nodes.len()];
     for q in quads {
         let p = q.map(|i| nodes[i as usize]);
         // circumferential x axial = outward
@@ -560,39 +563,44 @@ fn surface_normals(
         let b = (p[3] - p[0]) + (p[2] - p[1]);
         let v = a.cross(&b);
         for c in 0..4 {
-            *normal.entry(q[c]).or_insert_with(Vector3::zeros) += v;
+            normal[graph.position[q[c] as usize]] += v;
         }
     }
     let unit = |v: Vector3<f64>, fallback: Vector3<f64>| if v.norm() > 0.0 { v.normalize() } else { fallback };
-    for (id, v) in normal.iter_mut() {
-        *v = unit(*v, rays[*id as usize]);
+    for (v, &s) in normal.iter_mut().zip(&graph.nodes) {
+        *v = unit(*v, rays[s as usize]);
     }
-    // One pass of neighbour averaging over the nodes `selected` accepts.
-    let smooth = |normal: &mut BTreeMap<u32, Vector3<f64>>, selected: &dyn Fn(u32) -> bool| {
-        let prev = normal.clone();
-        for (id, v) in normal.iter_mut() {
-            if !selected(*id) {
-                continue;
-            }
-            let nb = &neighbours[id];
-            let mut sum = prev[id] * (2.0 + 4usize.saturating_sub(nb.len()) as f64);
-            for j in nb {
-                sum += prev[j];
-            }
-            *v = unit(sum, prev[id]);
+    // One pass of neighbour averaging over the nodes listed.
+    let smooth = |normal: &mut Vec<Vector3<f64>>, selected: &[usize]| {
+        let averaged: Vec<Vector3<f64>> = selected
+            .iter()
+            .map(|&i| {
+                let nb = &graph.neighbours[i];
+                let mut sum = normal[i] * (2.0 + 4usize.saturating_sub(nb.len()) as f64);
+                for &j in nb {
+                    sum += normal[j];
+                }
+                unit(sum, normal[i])
+            })
+            .collect();
+        for (&i, v) in selected.iter().zip(averaged) {
+            normal[i] = v;
         }
     };
+    let all: Vec<usize> = (0..graph.nodes.len()).collect();
     for _ in 0..NORMAL_SMOOTHING_PASSES {
-        smooth(&mut normal, &|_| true);
+        smooth(&mut normal, &all);
     }
     // Across a flow divider the normal turns fast; grown along it unsmoothed, the outer wall
     // layers shear. Junction nodes get more passes.
+    let in_junction: Vec<usize> = all.iter().copied().filter(|&i| junction_node[graph.nodes[i] as usize]).collect();
     for _ in 0..JUNCTION_SMOOTHING_PASSES {
-        smooth(&mut normal, &|id| junction_node[id as usize]);
+        smooth(&mut normal, &in_junction);
     }
     for (id, t) in end_tangent {
-        let v = normal[id];
-        normal.insert(*id, unit(v - t * v.dot(t), rays[*id as usize]));
+        let i = graph.position[*id as usize];
+        let v = normal[i];
+        normal[i] = unit(v - t * v.dot(t), rays[*id as usize]);
     }
-    normal.into_iter().collect()
+    normal
 }

@@ -73,7 +73,8 @@ fn assert_conformal(name: &str, mesh: &VesselMesh) {
     let boundary = count.values().filter(|&&c| c == 1).count();
     let mut expected = mesh.face_sets[sets::WALL_OUTER_FACES].len();
     for end in &mesh.ends {
-        expected += mesh.face_sets[&sets::lumen_end(&end.name)].len() + mesh.face_sets[&sets::wall_end(&end.name)].len();
+        expected +=
+            mesh.face_sets[&sets::lumen_end(&end.name)].len() + mesh.face_sets[&sets::wall_end(&end.name)].len();
     }
     assert_eq!(boundary, expected, "{name}: boundary faces are not exactly the outer wall and the ends");
     let key = |f: &vesselhex::mesh::ElementFace| {
@@ -95,8 +96,12 @@ fn assert_conformal(name: &str, mesh: &VesselMesh) {
     assert_eq!(coords.len(), before, "{name}: coincident nodes");
 }
 
-/// Across every face shared by a parent's and a daughter's wall elements, the longitudinal and
-/// circumferential directions agree (no flip at the junction).
+/// Across every face shared by a parent's and a daughter's wall elements the triads do not flip:
+/// the face is the parent's downstream face and the daughter's upstream face, node for node
+/// (the structured directions carry over), and on both sides e_long crosses it downstream,
+/// e_circ runs along its circumferential edge and e_rad along its radial edge. The angle
+/// between the two e_long may be large (a daughter leaving backwards, as the carotid's external
+/// branch does, turns the flow by more than a right angle); a flip is a reversed sense.
 fn assert_triads_continuous(name: &str, m: &Meshed) {
     let mesh = &m.mesh;
     let mut owner: HashMap<[u32; 4], usize> = HashMap::new();
@@ -105,17 +110,37 @@ fn assert_triads_continuous(name: &str, m: &Meshed) {
         for f in 0..6 {
             let mut q = face_nodes(&mesh.hexes[e], f);
             q.sort_unstable();
-            if let Some(&o) = owner.get(&q) {
-                let (a, b) = (mesh.branch_of[o] as usize, mesh.branch_of[e] as usize);
-                let related = m.tree.branches[a].parent == Some(b) || m.tree.branches[b].parent == Some(a);
-                if a != b && related {
-                    pairs += 1;
-                    let (ta, tb) = (&mesh.triads[o], &mesh.triads[e]);
-                    assert!(ta.e_long.dot(&tb.e_long) > 0.0, "{name}: e_long flips between elements {o} and {e}");
-                    assert!(ta.e_circ.dot(&tb.e_circ) > 0.0, "{name}: e_circ flips between elements {o} and {e}");
-                }
-            } else {
+            let Some(&o) = owner.get(&q) else {
                 owner.insert(q, e);
+                continue;
+            };
+            let (a, b) = (mesh.branch_of[o] as usize, mesh.branch_of[e] as usize);
+            let (parent, daughter) = if m.tree.branches[b].parent == Some(a) {
+                (o, e)
+            } else if m.tree.branches[a].parent == Some(b) {
+                (e, o)
+            } else {
+                continue;
+            };
+            pairs += 1;
+            // Canonical order: nodes 4..8 are the downstream face, 0..4 the upstream one, each
+            // running radial (0 -> 1) then circumferential (0 -> 3).
+            let down: [u32; 4] = mesh.hexes[parent][4..8].try_into().unwrap();
+            let up: [u32; 4] = mesh.hexes[daughter][0..4].try_into().unwrap();
+            assert_eq!(
+                down, up,
+                "{name}: elements {parent} and {daughter} do not meet downstream face to upstream face"
+            );
+            let p = down.map(|i| mesh.nodes[i as usize]);
+            let radial = p[1] - p[0];
+            let circ = p[3] - p[0];
+            let normal = radial.cross(&circ);
+            for x in [parent, daughter] {
+                let t = &mesh.triads[x];
+                let what = format!("{name}: element {x} (parent {parent}, daughter {daughter})");
+                assert!(t.e_long.dot(&normal) > 0.0, "{what}: e_long crosses the shared face upstream");
+                assert!(t.e_circ.dot(&circ) > 0.0, "{what}: e_circ runs against the shared circumferential edge");
+                assert!(t.e_rad.dot(&radial) > 0.0, "{what}: e_rad runs against the shared radial edge");
             }
         }
     }
@@ -227,10 +252,13 @@ const MAX_SWEEP_FAILURES: usize = 12;
 #[test]
 fn real_branched_vessels_mesh_within_the_bars() {
     let Some(v) = vessels_dir() else { return };
-    // gmsh_carotid_bifurcation and gmsh_aortic_arch do not mesh yet (closing note).
-    let cases: [(&str, &str, &str, LengthUnit); 2] = [
+    // gmsh_aortic_arch does not mesh yet (closing note). The carotid's file places its junction
+    // at the wall of the external carotid's ostium: it meshes because the junction moves to
+    // the middle of the bulb (centerline::junction_centre).
+    let cases: [(&str, &str, &str, LengthUnit); 3] = [
         ("vmtk_aortoiliac", "aorta-surface-open-ends.stl", "aorta-centerline.vtp", LengthUnit::Mm),
         ("simvascular_demo_aortoiliac", "demo.vtp", "demo-centerlines.vtp", LengthUnit::Cm),
+        ("gmsh_carotid_bifurcation", "carotid.stl", "centerlinesCAROTID.vtk", LengthUnit::M),
     ];
     for (case, surface, centerlines, unit) in cases {
         for preset in [Preset::Coarse, Preset::Medium] {
@@ -243,17 +271,25 @@ fn real_branched_vessels_mesh_within_the_bars() {
 }
 
 /// Issue 8: a bare branched surface meshes end to end with the centerlines vesselhex computes
-/// itself, and the report names its junction. The wall mean, skew and fidelity bars hold; the
-/// worst element (a thin adventitia hex at the flow divider) is valid but below 0.2 today, so
-/// only validity is asserted for it (closing note).
+/// itself, and the report names its junction; every bar of the branching issue holds.
 #[test]
 fn bare_branched_surface_meshes_with_computed_centerlines() {
     let Some(v) = vessels_dir() else { return };
     let out = temp_dir("bare-aortoiliac");
     let surface = v.join("vmtk_aortoiliac/aorta-surface-open-ends.stl");
-    let o = vesselhex(&["mesh", "--surface", path_str(&surface), "--output", path_str(&out), "--quiet", "--formats", "vtu"]);
+    let o = vesselhex(&[
+        "mesh",
+        "--surface",
+        path_str(&surface),
+        "--output",
+        path_str(&out),
+        "--quiet",
+        "--formats",
+        "vtu",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(r["branches"].as_array().unwrap().len(), 3);
     assert_eq!(r["junctions"].as_array().unwrap().len(), 1);
     let f = |p: &str| r.pointer(p).and_then(|v| v.as_f64()).unwrap_or_else(|| panic!("no {p}"));
@@ -264,7 +300,7 @@ fn bare_branched_surface_meshes_with_computed_centerlines() {
         f("/wall/scaled_jacobian/mean"),
         f("/lumen/equiangle_skew/mean")
     );
-    assert!(min_sj > 0.0);
+    assert!(min_sj >= MIN_SCALED_JACOBIAN, "bare aortoiliac: min scaled Jacobian {min_sj:.3}");
     assert!(f("/wall/scaled_jacobian/mean") >= MIN_WALL_MEAN_SJ);
     assert!(f("/lumen/equiangle_skew/mean") <= MAX_LUMEN_MEAN_SKEW);
     assert!(f("/surface_accuracy/node_to_surface_um/max") <= MAX_NODE_TO_SURFACE_UM);

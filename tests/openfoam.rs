@@ -695,8 +695,8 @@ fn every_end_of_a_multi_outlet_mesh_is_its_own_patch_with_its_own_conditions() {
 }
 
 /// Branched vessels: the bundled Y-bifurcation and T-junction, at two presets, and the real
-/// aorto-iliac bifurcation: checkMesh says `Mesh OK.` with no `***` line, ASCII and binary alike,
-/// and every outlet is its own patch.
+/// aorto-iliac and carotid bifurcations: checkMesh says `Mesh OK.` with no `***` line, ASCII and
+/// binary alike, and every outlet is its own patch.
 #[test]
 fn checkmesh_accepts_branched_vessels() {
     if !openfoam_available("checkmesh_accepts_branched_vessels") {
@@ -722,6 +722,15 @@ fn checkmesh_accepts_branched_vessels() {
             &MeshConfig::preset(Preset::Coarse),
         );
         check_ascii_and_binary(&mesh, "vmtk_aortoiliac");
+        let d = v.join("gmsh_carotid_bifurcation");
+        let mesh = common::mesh_files_in(
+            &d.join("carotid.stl"),
+            &d.join("centerlinesCAROTID.vtk"),
+            vesselhex::units::LengthUnit::M,
+            &MeshConfig::preset(Preset::Coarse),
+        );
+        assert_eq!(mesh.outlets().count(), 2);
+        check_ascii_and_binary(&mesh, "gmsh_carotid_bifurcation");
     }
 }
 

@@ -4,13 +4,13 @@
 use indexmap::IndexMap;
 use nalgebra::{Matrix3, Point3, Vector3};
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 use vesselhex::config::MeshConfig;
 use vesselhex::input::{read_centerlines, read_surface, CenterlinePolyline, Centerlines, TriangleSurface};
 use vesselhex::mesh::VesselMesh;
 use vesselhex::progress::Progress;
 use vesselhex::surface::LumenSurface;
 use vesselhex::units::LengthUnit;
-use std::process::{Command, Output};
 
 pub fn crate_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -58,7 +58,16 @@ pub fn path_str(p: &Path) -> &str {
 
 /// Runs `vesselhex mesh` and returns the parsed report; panics with stderr on failure.
 pub fn mesh_cli(surface: &Path, centerlines: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
-    let mut args = vec!["mesh", "--surface", path_str(surface), "--centerlines", path_str(centerlines), "--output", path_str(out), "--quiet"];
+    let mut args = vec![
+        "mesh",
+        "--surface",
+        path_str(surface),
+        "--centerlines",
+        path_str(centerlines),
+        "--output",
+        path_str(out),
+        "--quiet",
+    ];
     args.extend_from_slice(extra);
     let o = vesselhex(&args);
     assert!(o.status.success(), "vesselhex failed: {}", String::from_utf8_lossy(&o.stderr));
@@ -70,7 +79,11 @@ pub fn mesh_cli(surface: &Path, centerlines: &Path, out: &Path, extra: &[&str]) 
 /// missing module is a failure.
 pub fn python_with(module: &str) -> Option<String> {
     for py in ["python3", "python"] {
-        let ok = Command::new(py).args(["-c", &format!("import {module}")]).output().map(|o| o.status.success()).unwrap_or(false);
+        let ok = Command::new(py)
+            .args(["-c", &format!("import {module}")])
+            .output()
+            .map(|o| o.status.success())
+            .unwrap_or(false);
         if ok {
             return Some(py.to_string());
         }
@@ -134,11 +147,15 @@ pub fn derive_straight_centerline(surface: &TriangleSurface, step: f64) -> Cente
     }
 }
 
-
 /// Meshes a surface file with a centerline file (both mm).
 pub fn mesh_files(surface: &Path, centerlines: &Path, config: &MeshConfig) -> VesselMesh {
-    let s = read_surface(surface, LengthUnit::Mm).unwrap();
-    let c = read_centerlines(centerlines, LengthUnit::Mm).unwrap();
+    mesh_files_in(surface, centerlines, LengthUnit::Mm, config)
+}
+
+/// A surface and its centerlines in `unit`, meshed with `config`.
+pub fn mesh_files_in(surface: &Path, centerlines: &Path, unit: LengthUnit, config: &MeshConfig) -> VesselMesh {
+    let s = read_surface(surface, unit).unwrap();
+    let c = read_centerlines(centerlines, unit).unwrap();
     vesselhex::pipeline::mesh_vessel(&s, &c, config, &mut Progress::new(true, 9))
         .unwrap_or_else(|e| panic!("{}: {e}", surface.display()))
         .mesh
@@ -148,8 +165,10 @@ pub fn mesh_files(surface: &Path, centerlines: &Path, config: &MeshConfig) -> Ve
 /// vmtk_abdominal_aorta_segment with a derived one.
 pub fn real_unbranched_meshes(vessels: &Path, config: &MeshConfig) -> Vec<(&'static str, VesselMesh)> {
     let d = vessels.join("aneurisk_C0092_ica_segment");
-    let c0092 = mesh_files(&d.join("C0092_clip1_0.vtp"), &d.join("C0092_clip1_mesh1_0.95_ratio_centerline.vtp"), config);
-    let aorta = read_surface(&vessels.join("vmtk_abdominal_aorta_segment/aorta-surface-segment-2.stl"), LengthUnit::Mm).unwrap();
+    let c0092 =
+        mesh_files(&d.join("C0092_clip1_0.vtp"), &d.join("C0092_clip1_mesh1_0.95_ratio_centerline.vtp"), config);
+    let aorta = read_surface(&vessels.join("vmtk_abdominal_aorta_segment/aorta-surface-segment-2.stl"), LengthUnit::Mm)
+        .unwrap();
     let cl = derive_straight_centerline(&aorta, 2.0);
     let aorta = vesselhex::pipeline::mesh_vessel(&aorta, &cl, config, &mut Progress::new(true, 9)).unwrap().mesh;
     vec![("aneurisk_C0092_ica_segment", c0092), ("vmtk_abdominal_aorta_segment", aorta)]
