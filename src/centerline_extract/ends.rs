@@ -1,6 +1,7 @@
 //! Finding a vessel's ends: flat caps (tagged by a cell array, or found as planar discs with a
 //! sharp rim), open boundary loops, and points given by the user.
 
+use super::medial::Ball;
 use super::topology::{boundary_loops, loop_centre_and_area, triangle_neighbours, BOUNDARY, NON_MANIFOLD};
 use nalgebra::{Point3, Vector3};
 use std::collections::BTreeMap;
@@ -20,10 +21,10 @@ pub enum EndKind {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VesselEnd {
     /// Where the centerline starts or stops: the loop's length-weighted centre (VMTK's cap
-    /// centre), or the given point's snapped surface vertex.
+    /// centre), or for a given point the centre of the inscribed ball under it.
     pub centre: Point3<f64>,
     /// Equivalent radius sqrt(area / pi) of the end section (for a given point: the radius of
-    /// the maximal ball touching the surface there).
+    /// that inscribed ball).
     pub radius: f64,
     pub kind: EndKind,
 }
@@ -36,8 +37,6 @@ const CAP_ROUNDNESS: f64 = 0.5;
 const REGION_COS: f64 = 0.9994; // 2 degrees
 /// A found (untagged) cap's rim is sharp: the wall meets it at more than this angle (cosine).
 const RIM_COS: f64 = 0.866; // 30 degrees
-/// Loops whose equivalent radius is below this fraction of the largest are holes, not ends.
-pub const HOLE_FRACTION: f64 = 0.2;
 
 /// Triangle index sets of the flat caps: the tag values whose triangles form a flat disc, or,
 /// without such tags, planar regions bounded by one sharp rim.
@@ -48,9 +47,7 @@ pub fn find_caps(
 ) -> Vec<(Option<i64>, Vec<u32>)> {
     if let Some(tags) = tags.filter(|t| t.len() == triangles.len()) {
         let mut groups: BTreeMap<i64, Vec<u32>> = BTreeMap::new();
-        tags.iter()
-            .enumerate()
-            .for_each(|(t, &g)| groups.entry(g).or_default().push(t as u32));
+        tags.iter().enumerate().for_each(|(t, &g)| groups.entry(g).or_default().push(t as u32));
         let caps: Vec<(Option<i64>, Vec<u32>)> = groups
             .into_iter()
             .filter(|(_, g)| 2 * g.len() < triangles.len() && is_flat_disc(vertices, triangles, g))
@@ -133,43 +130,71 @@ fn is_flat_disc(vertices: &[Point3<f64>], triangles: &[[u32; 3]], subset: &[u32]
         return false;
     };
     let radius = (area / std::f64::consts::PI).sqrt();
-    let perimeter: f64 = (0..lp.len())
-        .map(|i| (vertices[lp[(i + 1) % lp.len()] as usize] - vertices[lp[i] as usize]).norm())
-        .sum();
-    let flat = tris
-        .iter()
-        .flatten()
-        .all(|&v| (vertices[v as usize] - centre).dot(&normal).abs() <= CAP_FLATNESS * radius);
+    let perimeter: f64 =
+        (0..lp.len()).map(|i| (vertices[lp[(i + 1) % lp.len()] as usize] - vertices[lp[i] as usize]).norm()).sum();
+    let flat =
+        tris.iter().flatten().all(|&v| (vertices[v as usize] - centre).dot(&normal).abs() <= CAP_FLATNESS * radius);
     flat && 4.0 * std::f64::consts::PI * area >= CAP_ROUNDNESS * perimeter * perimeter
 }
 
-/// The ends given by boundary loops (holes below [`HOLE_FRACTION`] of the largest loop left
-/// out), labelled as caps when every loop vertex belonged to a removed cap.
+/// A boundary loop is a vessel end when it spans the vessel: its equivalent radius is at least
+/// this fraction of the local vessel radius, the radius of the maximal ball tangent to the loop's
+/// plane at its centre, on the lumen's side. At a vessel's end that ball is the end section's own
+/// inscribed ball (ratio about 1; more for an oblique cut). Behind a hole punched in a wall it is
+/// the ball of the vessel around the hole, much larger than the hole; a side branch cut at least
+/// one of its radii from its parent keeps its own ball and stays an end.
+pub const END_SPAN: f64 = 0.5;
+
+/// A boundary loop left out as a hole in the wall, with the figures that decided it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hole {
+    pub centre: Point3<f64>,
+    /// Equivalent radius sqrt(area / pi) of the loop.
+    pub radius: f64,
+    /// Radius of the maximal ball tangent at its centre (the local vessel radius).
+    pub vessel_radius: f64,
+}
+
+/// The centre of every loop and the unit normal of its plane pointing into the lumen (`lumen_side` = +1 when the loop's right-hand normal does, i.e. when
+/// the triangles face out of the lumen).
+pub fn loop_planes(vertices: &[Point3<f64>], loops: &[Vec<u32>], lumen_side: f64) -> Vec<(Point3<f64>, Vector3<f64>)> {
+    loops
+        .iter()
+        .map(|lp| {
+            let (centre, area) = loop_centre_and_area(vertices, lp);
+            (centre, area.try_normalize(0.0).unwrap_or_default() * lumen_side)
+        })
+        .collect()
+}
+
+/// The ends given by boundary loops, labelled as caps when every loop vertex belonged to a
+/// removed cap, and the loops left out as holes (see [`END_SPAN`]). `balls` holds, for every
+/// loop, the maximal ball tangent at its centre on the lumen's side; a loop without one cannot be
+/// judged and is kept as an end.
 pub fn loop_ends(
     vertices: &[Point3<f64>],
     loops: &[Vec<u32>],
     cap_tag_of_vertex: &BTreeMap<u32, Option<i64>>,
-) -> Vec<VesselEnd> {
-    let ends: Vec<VesselEnd> = loops
-        .iter()
-        .map(|lp| {
-            let (centre, area) = loop_centre_and_area(vertices, lp);
-            let tags: Vec<Option<&Option<i64>>> = lp.iter().map(|v| cap_tag_of_vertex.get(v)).collect();
-            let kind = match tags.first() {
-                Some(Some(tag)) if tags.iter().all(|t| t.is_some()) => EndKind::Cap { tag: **tag },
-                _ => EndKind::Open,
-            };
-            VesselEnd {
-                centre,
-                radius: (area.norm() / std::f64::consts::PI).sqrt(),
-                kind,
+    balls: &[Option<Ball>],
+) -> (Vec<VesselEnd>, Vec<Hole>) {
+    let (mut ends, mut holes) = (vec![], vec![]);
+    for (lp, ball) in loops.iter().zip(balls) {
+        let (centre, area) = loop_centre_and_area(vertices, lp);
+        let tags: Vec<Option<&Option<i64>>> = lp.iter().map(|v| cap_tag_of_vertex.get(v)).collect();
+        let kind = match tags.first() {
+            Some(Some(tag)) if tags.iter().all(|t| t.is_some()) => EndKind::Cap { tag: **tag },
+            _ => EndKind::Open,
+        };
+        let radius = (area.norm() / std::f64::consts::PI).sqrt();
+        if let Some(b) = ball {
+            if radius < END_SPAN * b.radius {
+                holes.push(Hole { centre, radius, vessel_radius: b.radius });
+                continue;
             }
-        })
-        .collect();
-    let largest = ends.iter().map(|e| e.radius).fold(0.0, f64::max);
-    ends.into_iter()
-        .filter(|e| e.radius >= HOLE_FRACTION * largest)
-        .collect()
+        }
+        ends.push(VesselEnd { centre, radius, kind });
+    }
+    (ends, holes)
 }
 
 /// How the inlet is chosen among the ends.
@@ -187,7 +212,5 @@ pub fn choose_inlet(ends: &[VesselEnd], choice: InletChoice) -> usize {
         InletChoice::Largest => -e.radius,
         InletChoice::Nearest(p) => (e.centre - p).norm(),
     };
-    (0..ends.len())
-        .min_by(|&a, &b| key(&ends[a]).total_cmp(&key(&ends[b])).then(a.cmp(&b)))
-        .unwrap_or(0)
+    (0..ends.len()).min_by(|&a, &b| key(&ends[a]).total_cmp(&key(&ends[b])).then(a.cmp(&b))).unwrap_or(0)
 }

@@ -37,64 +37,91 @@ pub struct Ball {
     pub radius: f64,
 }
 
-/// The shrinking-ball medial ball of every vertex (Ma, Bae, Bhatt & Lee 2012): start from a
-/// ball tangent at the vertex on its inner side, and while it holds another vertex, shrink it to
-/// the ball tangent at the vertex through that one. `None` where the normal is undefined or the
-/// ball never closes (the vertex faces an opening larger than `max_radius`). Vertices with a
-/// zero normal (not on any kept triangle) neither get nor block a ball; on dense surfaces only
-/// every k-th vertex gets one (see [`BALL_BUDGET`]).
+/// The surface vertices that block balls (those with a normal: vertices of removed caps have
+/// none) in a k-d tree.
+struct Blockers<'a> {
+    vertices: &'a [Point3<f64>],
+    used: Vec<usize>,
+    tree: ImmutableKdTree<f64, 3>,
+    max_radius: f64,
+}
+
+impl<'a> Blockers<'a> {
+    fn new(vertices: &'a [Point3<f64>], inward: &[Vector3<f64>], max_radius: f64) -> Option<Self> {
+        let used: Vec<usize> = (0..vertices.len()).filter(|&i| inward[i] != Vector3::zeros()).collect();
+        let pts: Vec<[f64; 3]> = used.iter().map(|&i| arr(&vertices[i])).collect();
+        let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&pts).ok()?;
+        Some(Blockers { vertices, used, tree, max_radius })
+    }
+
+    /// The shrinking ball tangent at `p` on the side of the unit vector `n`: start from a ball
+    /// of radius `max_radius`, and while it holds a vertex other than `p`, shrink it to the ball
+    /// tangent at `p` through that vertex. `None` when the ball never closes (`p` faces an
+    /// opening larger than `max_radius`) or a vertex lies on the wrong side of the tangent plane.
+    fn shrink(&self, p: Point3<f64>, n: Vector3<f64>) -> Option<Ball> {
+        let two = NonZeroUsize::new(2).expect("2 > 0");
+        let tol = 1e-9 * self.max_radius;
+        let mut r = self.max_radius;
+        for _ in 0..SHRINK_ITERATIONS {
+            let c = p + n * r;
+            let near = self.tree.query(&arr(&c)).nearest_n::<SquaredEuclidean<f64>>(two).execute();
+            let q = near.iter().map(|h| self.vertices[self.used[h.item as usize]]).find(|q| (q - p).norm() > tol)?;
+            if (q - c).norm() >= r - tol {
+                return (r < self.max_radius).then_some(Ball { centre: c, radius: r });
+            }
+            let d = q - p;
+            let along = d.dot(&n);
+            if along <= 0.0 {
+                return None;
+            }
+            let shrunk = d.norm_squared() / (2.0 * along);
+            if shrunk >= r - tol {
+                return Some(Ball { centre: c, radius: r });
+            }
+            r = shrunk;
+        }
+        Some(Ball { centre: p + n * r, radius: r })
+    }
+}
+
+/// The shrinking-ball medial ball of every vertex (Ma, Bae, Bhatt & Lee 2012), tangent at the
+/// vertex on its inner side (see [`Blockers::shrink`]). `None` where the normal is undefined or
+/// the ball never closes. Vertices with a zero normal (not on any kept triangle) neither get nor
+/// block a ball; on dense surfaces only every k-th vertex gets one (see [`BALL_BUDGET`]).
 pub fn shrinking_balls(vertices: &[Point3<f64>], inward: &[Vector3<f64>], max_radius: f64) -> Vec<Option<Ball>> {
-    // Only vertices of the (opened) surface block balls: those of removed caps have no normal.
-    let used: Vec<usize> = (0..vertices.len()).filter(|&i| inward[i] != Vector3::zeros()).collect();
-    let pts: Vec<[f64; 3]> = used.iter().map(|&i| arr(&vertices[i])).collect();
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&pts) else {
+    let Some(blockers) = Blockers::new(vertices, inward, max_radius) else {
         return vec![None; vertices.len()];
     };
-    let two = NonZeroUsize::new(2).expect("2 > 0");
-    let tol = 1e-9 * max_radius;
-    let stride = used.len().div_ceil(BALL_BUDGET).max(1);
+    let stride = blockers.used.len().div_ceil(BALL_BUDGET).max(1);
     (0..vertices.len())
         .into_par_iter()
         .map(|i| {
-            let (p, n) = (vertices[i], inward[i]);
+            let n = inward[i];
             if n == Vector3::zeros() || i % stride != 0 {
                 return None;
             }
-            let mut r = max_radius;
-            for _ in 0..SHRINK_ITERATIONS {
-                let c = p + n * r;
-                let near = tree.query(&arr(&c)).nearest_n::<SquaredEuclidean<f64>>(two).execute();
-                let q = near
-                    .iter()
-                    .map(|h| vertices[used[h.item as usize]])
-                    .find(|q| (q - p).norm() > tol)?;
-                if (q - c).norm() >= r - tol {
-                    return (r < max_radius).then_some(Ball { centre: c, radius: r });
-                }
-                let d = q - p;
-                let along = d.dot(&n);
-                if along <= 0.0 {
-                    return None;
-                }
-                let shrunk = d.norm_squared() / (2.0 * along);
-                if shrunk >= r - tol {
-                    return Some(Ball { centre: c, radius: r });
-                }
-                r = shrunk;
-            }
-            Some(Ball {
-                centre: p + n * r,
-                radius: r,
-            })
+            blockers.shrink(vertices[i], n)
         })
         .collect()
+}
+
+/// The shrinking balls tangent at arbitrary points (not vertices), each on the side of its unit
+/// vector; blocked by the vertices with a nonzero `inward` normal as in [`shrinking_balls`].
+pub fn tangent_balls(
+    vertices: &[Point3<f64>],
+    inward: &[Vector3<f64>],
+    at: &[(Point3<f64>, Vector3<f64>)],
+    max_radius: f64,
+) -> Vec<Option<Ball>> {
+    let Some(blockers) = Blockers::new(vertices, inward, max_radius) else {
+        return vec![None; at.len()];
+    };
+    at.iter().map(|&(p, n)| blockers.shrink(p, n)).collect()
 }
 
 /// Nodes (merged balls) and the links between overlapping ones.
 pub struct BallGraph {
     pub nodes: Vec<Ball>,
-    /// For each vertex, the node its ball was merged into.
-    pub node_of_vertex: Vec<Option<u32>>,
     links: Vec<Vec<(u32, f64)>>,
 }
 
@@ -137,17 +164,10 @@ impl BallGraph {
                     r += get(v).radius;
                 }
                 let m = members.len() as f64;
-                nodes.push(Ball {
-                    centre: Point3::from(c / m),
-                    radius: r / m,
-                });
+                nodes.push(Ball { centre: Point3::from(c / m), radius: r / m });
             }
         }
-        let mut graph = BallGraph {
-            nodes,
-            node_of_vertex,
-            links: vec![],
-        };
+        let mut graph = BallGraph { nodes, links: vec![] };
         graph.links = graph.link_all();
         graph
     }
@@ -163,12 +183,7 @@ impl BallGraph {
         let found: Vec<Vec<u32>> = (0..self.nodes.len())
             .into_par_iter()
             .map(|i| {
-                tree.query(&pts[i])
-                    .nearest_n::<SquaredEuclidean<f64>>(k)
-                    .execute()
-                    .iter()
-                    .map(|h| h.item)
-                    .collect()
+                tree.query(&pts[i]).nearest_n::<SquaredEuclidean<f64>>(k).execute().iter().map(|h| h.item).collect()
             })
             .collect();
         for (i, near) in found.iter().enumerate() {
@@ -202,28 +217,17 @@ impl BallGraph {
         let dist = |b: &Ball| (b.centre - end.centre).norm();
         let mut order: Vec<usize> = (0..self.nodes.len()).collect();
         order.sort_by(|&a, &b| dist(&self.nodes[a]).total_cmp(&dist(&self.nodes[b])).then(a.cmp(&b)));
-        let holding: Vec<usize> = order
-            .iter()
-            .copied()
-            .filter(|&n| dist(&self.nodes[n]) < self.nodes[n].radius)
-            .collect();
-        let within: Vec<usize> = holding
-            .iter()
-            .copied()
-            .filter(|&n| dist(&self.nodes[n]) < LINK_REACH * self.nodes[n].radius)
-            .collect();
+        let holding: Vec<usize> =
+            order.iter().copied().filter(|&n| dist(&self.nodes[n]) < self.nodes[n].radius).collect();
+        let within: Vec<usize> =
+            holding.iter().copied().filter(|&n| dist(&self.nodes[n]) < LINK_REACH * self.nodes[n].radius).collect();
         let cost = |n: usize| dist(&self.nodes[n]) * 0.5 * (1.0 / end.radius + 1.0 / self.nodes[n].radius);
         let chosen: Vec<(usize, f64)> = if !holding.is_empty() {
             let set = if within.is_empty() { &holding[..1] } else { &within[..] };
             set.iter().map(|&n| (n, cost(n))).collect()
         } else {
             let overlapping = |&&n: &&usize| dist(&self.nodes[n]) < OVERLAP * (end.radius + self.nodes[n].radius);
-            order
-                .iter()
-                .take(NEIGHBOURS)
-                .filter(overlapping)
-                .map(|&n| (n, cost(n)))
-                .collect()
+            order.iter().take(NEIGHBOURS).filter(overlapping).map(|&n| (n, cost(n))).collect()
         };
         self.nodes.push(end);
         self.links.push(vec![]);

@@ -38,11 +38,16 @@
 //! Triangles are first wound consistently (inward and outward triangles mixed in one file are
 //! repaired) and oriented by the sign of the enclosed volume. Flat caps are taken off: the
 //! tag values of a cell array (`ModelFaceID`) whose triangles form a flat disc, or else planar
-//! regions with a sharp rim. Every boundary loop of what remains is an end (loops smaller than
-//! a fifth of the largest are holes), its centre the edge-length weighted loop centre (VMTK's
-//! cap centre) and its size the equivalent radius sqrt(area / pi). Rounded caps have neither:
-//! the user gives points near them (`--ends`), snapped to the nearest surface vertex whose
-//! maximal ball becomes the end. The inlet is the largest end, or the end nearest a point.
+//! regions with a sharp rim. Every boundary loop of what remains is an end, its centre the
+//! edge-length weighted loop centre (VMTK's cap centre) and its size the equivalent radius
+//! sqrt(area / pi), unless it is a hole in the wall: a loop is judged against the vessel around
+//! it, not against the other loops (a side branch's end can be smaller than a defect in the
+//! aorta): the maximal ball tangent to the loop's plane at its centre, on the lumen's side, is
+//! the end section's own inscribed ball at an end (radius about the loop's), the vessel's ball
+//! behind a hole (much larger than the loop). Rounded caps have neither: the user gives points
+//! on or near them (`--ends`), snapped to the surface and moved inward up to the medial axis
+//! (the ball stops growing there), whose ball becomes the end. The inlet is the largest end, or
+//! the end nearest a point.
 
 mod ends;
 mod medial;
@@ -50,7 +55,7 @@ mod split;
 mod topology;
 mod vtp;
 
-pub use ends::{EndKind, InletChoice, VesselEnd};
+pub use ends::{EndKind, Hole, InletChoice, VesselEnd, END_SPAN};
 pub use split::branch_split;
 pub use vtp::{write_branch_split, write_vtp};
 
@@ -69,6 +74,16 @@ const STEP_FRACTION: f64 = 0.1;
 const SMOOTH_SIGMA: f64 = 0.25;
 /// A given end point within this many end radii of a found end's centre names that end.
 const SAME_END: f64 = 1.5;
+/// A given end point is moved inward from the surface in steps of this fraction of the distance
+/// to the surface reached so far (and at least half an edge of the triangle it snapped to) ...
+const MARCH_STEP: f64 = 0.1;
+/// ... while that distance grows by at least this fraction of the step (1 when moving straight
+/// away from a wall, below 0 once the step crosses the medial axis).
+const MARCH_GROWTH: f64 = 0.5;
+/// ... or stops after this many steps without such growth.
+const MARCH_PATIENCE: usize = 4;
+/// A given end point outside the surface by more than this many vessel radii there is refused.
+const FAR_FROM_SURFACE: f64 = 2.0;
 /// Two largest ends closer than this ratio make the automatic inlet choice worth a note.
 const AMBIGUOUS_INLET: f64 = 0.9;
 
@@ -95,6 +110,8 @@ pub struct Extraction {
     pub ends: Vec<VesselEnd>,
     /// Index of the inlet in `ends`; the polylines go to the other ends in order.
     pub inlet: usize,
+    /// Boundary loops left out as holes in the wall (too small for the vessel around them).
+    pub holes: Vec<Hole>,
     /// Facts worth telling the user (repairs, caps removed, ambiguous inlet).
     pub notes: Vec<String>,
 }
@@ -129,17 +146,24 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
     }
     let open: Vec<[u32; 3]> = triangles.iter().zip(&in_cap).filter(|(_, c)| !**c).map(|(t, _)| *t).collect();
     let loops = topology::boundary_loops(&open);
-    let mut found = ends::loop_ends(vertices, &loops, &cap_tag_of_vertex);
-    if found.len() < loops.len() {
-        notes.push(format!("{} small boundary loops ignored as holes", loops.len() - found.len()));
-    }
 
     // Inward vertex normals: the winding's sign from the volume closed by fans on every loop.
     let sign = if topology::signed_volume6(vertices, &open, &loops) > 0.0 { -1.0 } else { 1.0 };
     let inward: Vec<_> = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
     let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
     let (lo, hi) = lumen.bounding_box();
-    let balls = medial::shrinking_balls(vertices, &inward, (hi - lo).norm());
+    let diagonal = (hi - lo).norm();
+    let balls = medial::shrinking_balls(vertices, &inward, diagonal);
+    let planes = ends::loop_planes(vertices, &loops, -sign);
+    let loop_balls = medial::tangent_balls(vertices, &inward, &planes, diagonal);
+    let (mut found, holes) = ends::loop_ends(vertices, &loops, &cap_tag_of_vertex, &loop_balls);
+    for h in &holes {
+        notes.push(format!(
+            "a boundary loop at ({:.3}, {:.3}, {:.3}) mm of radius {:.3} mm was left out as a hole in the wall (the \
+             vessel there has radius {:.3} mm)",
+            h.centre.x, h.centre.y, h.centre.z, h.radius, h.vessel_radius
+        ));
+    }
     let mut graph = BallGraph::new(&balls);
 
     // Ends as graph nodes: loop centres are added; given points use their vertex's ball.
@@ -149,28 +173,9 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
         if found.iter().any(|e| (e.centre - p).norm() < SAME_END * e.radius) {
             continue;
         }
-        let hit = lumen.closest(p);
-        let tri = lumen
-            .triangles
-            .get(hit.triangle as usize)
-            .ok_or_else(|| Error::input(source, "the surface has no triangles"))?;
-        let node = tri
-            .iter()
-            .filter_map(|&v| Some(((vertices[v as usize] - hit.point).norm(), graph.node_of_vertex[v as usize]?)))
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .map(|(_, n)| n)
-            .ok_or_else(|| {
-                Error::input(
-                    source,
-                    format!(
-                        "the end point ({:.3}, {:.3}, {:.3}) mm: no inscribed ball found at the surface there",
-                        p.x, p.y, p.z
-                    ),
-                )
-            })?;
-        let ball = graph.nodes[node as usize];
+        let ball = given_end_ball(p, &lumen, &inward, diagonal)?;
         found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Given });
-        end_nodes.push(node);
+        end_nodes.push(graph.add_end(ball));
     }
     if found.len() < 2 {
         return Err(Error::input(
@@ -224,7 +229,81 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
         cell_tags.insert("CenterlineIds".to_string(), polylines.len() as i64);
         polylines.push(CenterlinePolyline { points, radii: Some(radii), normals: None, cell_tags });
     }
-    Ok(Extraction { centerlines: Centerlines { polylines, source: source.clone() }, ends: found, inlet, notes })
+    Ok(Extraction { centerlines: Centerlines { polylines, source: source.clone() }, ends: found, inlet, holes, notes })
+}
+
+/// The end ball of a point given by the user: the point is snapped to the surface, then moved
+/// inward along the surface normal while its distance to the surface keeps growing, i.e. up to
+/// the medial axis. So a point at the very tip of a rounded cap (or a little outside it, or a
+/// little inside) gives the inscribed ball under the cap, not the tiny ball of a bump on the
+/// tip, which no larger ball overlaps. Fails when the point lies outside the surface by more than
+/// [`FAR_FROM_SURFACE`] times the radius of that ball (a point given in the wrong unit, or off
+/// the vessel).
+fn given_end_ball(
+    p: &Point3<f64>,
+    lumen: &LumenSurface,
+    inward: &[nalgebra::Vector3<f64>],
+    diagonal: f64,
+) -> Result<Ball> {
+    let source = &lumen.source;
+    let hit = lumen.closest(p);
+    let tri = lumen
+        .triangles
+        .get(hit.triangle as usize)
+        .ok_or_else(|| Error::input(source, "the surface has no triangles"))?;
+    let corners = tri.map(|v| lumen.vertices[v as usize]);
+    let normal = tri.iter().map(|&v| inward[v as usize]).sum::<nalgebra::Vector3<f64>>().try_normalize(0.0);
+    let edge = (0..3).map(|k| (corners[(k + 1) % 3] - corners[k]).norm()).fold(0.0, f64::max);
+    let mut best = Ball { centre: hit.point, radius: 0.0 };
+    if let Some(n) = normal {
+        // Gradient ascent of the distance to the surface: each step goes straight away from the
+        // nearest surface point (the inward normal there). It ends when the ball has not grown
+        // for a few steps: the steps then cross the medial axis back and forth. A few steps of
+        // patience carry it past small bumps of the surface (a tip vertex standing out of its
+        // cap has only a tiny ball).
+        let (mut x, mut direction, mut stalled) = (hit.point, n, 0);
+        let mut travelled = 0.0;
+        while travelled < diagonal && stalled < MARCH_PATIENCE {
+            let step = (MARCH_STEP * best.radius).max(0.5 * edge).max(1e-9 * diagonal);
+            x += direction * step;
+            travelled += step;
+            let near = lumen.closest(&x);
+            if near.distance >= best.radius + MARCH_GROWTH * step {
+                best = Ball { centre: x, radius: near.distance };
+                stalled = 0;
+            } else {
+                stalled += 1;
+            }
+            match (x - near.point).try_normalize(0.0) {
+                Some(d) => direction = d,
+                None => break,
+            }
+        }
+    }
+    let at = format!("the end point ({:.3}, {:.3}, {:.3}) mm", p.x, p.y, p.z);
+    if best.radius <= 0.0 || !best.radius.is_finite() {
+        return Err(Error::input(
+            source,
+            format!(
+                "{at}: no inscribed ball found inward of the surface point ({:.3}, {:.3}, {:.3}) nearest to it; give a \
+                 point on or just outside a rounded cap",
+                hit.point.x, hit.point.y, hit.point.z
+            ),
+        ));
+    }
+    let outside = normal.is_some_and(|n| (p - hit.point).dot(&n) < 0.0);
+    if outside && hit.distance > FAR_FROM_SURFACE * best.radius {
+        return Err(Error::input(
+            source,
+            format!(
+                "{at} lies {:.3} mm outside the surface, more than {FAR_FROM_SURFACE} times the vessel's radius there \
+                 ({:.3} mm): give a point on the tip of the rounded cap or just outside it, in the surface's units \
+                 (--units)",
+                hit.distance, best.radius
+            ),
+        ));
+    }
+    Ok(best)
 }
 
 /// Resamples a chain of balls at [`STEP_FRACTION`] of its small radii, smooths it with a
