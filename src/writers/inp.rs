@@ -663,17 +663,7 @@ impl<'a> Deck<'a> {
                 for ring in &self.ends {
                     let a = ring.centre.coords * self.scale;
                     let b = a + ring.normal * self.scale.max(1e-300);
-                    writeln!(
-                        w,
-                        "*TRANSFORM, NSET={}, TYPE=C\n{}, {}, {}, {}, {}, {}",
-                        ring.set,
-                        fmt_coord(a.x),
-                        fmt_coord(a.y),
-                        fmt_coord(a.z),
-                        fmt_coord(b.x),
-                        fmt_coord(b.y),
-                        fmt_coord(b.z)
-                    )?;
+                    writeln!(w, "*TRANSFORM, NSET={}, TYPE=C\n{}", ring.set, two_vectors(&a, &b))?;
                 }
                 writeln!(w, "*BOUNDARY")?;
                 for ring in &self.ends {
@@ -723,18 +713,7 @@ impl<'a> Deck<'a> {
             writeln!(w, ", 1., 0., 0., 0., 1., 0.")?;
             for e in layer.range.clone() {
                 let t = &mesh.triads[e];
-                let (a, b) = (t.e_circ, t.e_long);
-                writeln!(
-                    w,
-                    "{}, {}, {}, {}, {}, {}, {}",
-                    e + 1,
-                    fmt_coord(a.x),
-                    fmt_coord(a.y),
-                    fmt_coord(a.z),
-                    fmt_coord(b.x),
-                    fmt_coord(b.y),
-                    fmt_coord(b.z)
-                )?;
+                writeln!(w, "{}, {}", e + 1, two_vectors(&t.e_circ, &t.e_long))?;
             }
             match self.dialect {
                 Dialect::Abaqus => {
@@ -778,6 +757,12 @@ impl<'a> Deck<'a> {
         w.write_all(self.step.as_bytes())?;
         Ok(())
     }
+}
+
+/// The six components of two vectors as data-line fields, `ax, ay, az, bx, by, bz`: the two
+/// points of a `*TRANSFORM` axis, the two directions of a `*DISTRIBUTION` line.
+fn two_vectors(a: &nalgebra::Vector3<f64>, b: &nalgebra::Vector3<f64>) -> String {
+    [a.x, a.y, a.z, b.x, b.y, b.z].map(fmt_coord).join(", ")
 }
 
 /// Position (mesh unit) of a deck node label: a mesh node or a mid-edge node.
