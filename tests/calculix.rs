@@ -78,8 +78,20 @@ fn solve(mesh: &VesselMesh, options: &WriteOptions, name: &str) -> Run {
     );
     assert!(out.status.success(), "{name}: ccx failed:\n{log}");
     assert!(log.contains("Job finished"), "{name}: no 'Job finished':\n{log}");
-    let warnings: Vec<&str> = log.lines().filter(|l| l.contains("*WARNING")).collect();
+    let warnings: Vec<&str> = log.lines().filter(|l| l.contains("*WARNING") || l.contains("*ERROR")).collect();
     assert!(warnings.is_empty(), "{name}: ccx warned:\n{}", warnings.join("\n"));
+    // Both steps (toe, then on to the full pressure) ran to their end: the last converged
+    // increment is step 2's, at step time 1.
+    let last: Vec<f64> = sta
+        .lines()
+        .filter_map(|l| l.split_whitespace().map(|f| f.parse::<f64>()).collect::<Result<Vec<f64>, _>>().ok())
+        .filter(|f| f.len() == 7)
+        .last()
+        .unwrap_or_else(|| panic!("{name}: no converged increment in the .sta:\n{sta}"));
+    assert!(
+        last[0] == 2.0 && (last[5] - 1.0).abs() < 1e-9,
+        "{name}: the step did not end at the full pressure:\n{sta}"
+    );
     Run { dir: job, log }
 }
 
@@ -263,6 +275,17 @@ fn deck_is_deterministic_and_within_field_limits() {
             assert_eq!(lines.next().unwrap().split(',').count(), 5);
         }
     }
+    // Two steps: the toe to a tenth of the pressure, then the full pressure (MPa in mm decks).
+    let text = std::fs::read_to_string(a.join("calculix/model.inp")).unwrap();
+    let loads: Vec<f64> = text
+        .lines()
+        .filter(|l| l.starts_with("WALL_LUMEN, P, "))
+        .map(|l| l.rsplit(',').next().unwrap().trim().parse().unwrap())
+        .collect();
+    let full = options.fe.pressure_mmhg * MMHG_IN_MPA;
+    assert_eq!(loads.len(), 2, "{loads:?}");
+    assert!((loads[0] - 0.1 * full).abs() < 1e-12 * full && (loads[1] - full).abs() < 1e-12 * full, "{loads:?}");
+    assert_eq!(text.matches("*STEP").count(), 2);
     // C3D8H is refused in the CalculiX dialect.
     options.fe.calculix_element = ElementType::C3D8H;
     assert!(write_calculix(&mesh, &options, &a).unwrap_err().to_string().contains("hybrid"));
@@ -370,11 +393,18 @@ fn multi_outlet_deck_holds_every_end_about_its_own_axis() {
     }
 }
 
-/// A branched vessel (the bundled Y-bifurcation) inflates in ccx: the deck solves and the lumen
-/// surface moves out of the lumen along its outward normal (all but a few nodes at the flow
-/// divider's saddle, which pressure may pull inwards by a hair; they are counted). Linear elastic: with the default HGO
-/// material ccx stops at the fourth increment ("fiber extension is too large") near the flow
-/// divider (closing note).
+/// A branched vessel (the bundled Y-bifurcation) inflates in ccx with the default fibre material:
+/// the deck solves (both steps, no error line) and the lumen surface moves out of the lumen along
+/// its outward normal, but for the daughters' medial walls next to the bifurcation plane: the
+/// soft junction widens across that plane (its flanks by about 1.2 mm at 50 mmHg) and pulls those
+/// walls, each into its own daughter, apart (about 6 % of the lumen nodes, by up to about 0.4
+/// of the mean outward motion); they are counted, bounded and located.
+///
+/// 50 mmHg, not the default 100: on this coarse mesh the flow divider's wall is a hollow fold
+/// thinned to a third of the nominal thickness (the crotch limit of the wall growth), and with
+/// the soft default material that fold loses its lateral stability at about 57 mmHg (Newton
+/// corrections concentrate on the sideways motion of the divider's apex nodes, which lie on the
+/// mirror plane; ccx cuts the increment back to 1e-5 of the step there), whatever the increments.
 #[test]
 fn branched_y_bifurcation_deck_solves_and_inflates() {
     if !ccx_available() {
@@ -387,7 +417,8 @@ fn branched_y_bifurcation_deck_solves_and_inflates() {
         &MeshConfig::preset(vesselhex::config::Preset::Coarse),
     );
     let mut options = WriteOptions::default();
-    options.fe.material = MaterialModel::LinearElastic;
+    assert_eq!(options.fe.material, MaterialModel::Hgo);
+    options.fe.pressure_mmhg = 50.0;
     let run = solve(&mesh, &options, "y-bifurcation");
     let disp = frd_displacements(&run.dir);
     // Outward normals of the lumen surface at its nodes, from the lumen elements' outer faces.
@@ -401,10 +432,24 @@ fn branched_y_bifurcation_deck_solves_and_inflates() {
     }
     let ends: std::collections::HashSet<u32> =
         mesh.ends.iter().flat_map(|e| mesh.node_sets[&sets::wall_end(&e.name)].iter().copied()).collect();
+    // The bifurcation plane: through the three end centres.
+    let c: Vec<nalgebra::Point3<f64>> = mesh.ends.iter().map(|e| e.centre).collect();
+    assert_eq!(c.len(), 3);
+    let plane_normal = (c[1] - c[0]).cross(&(c[2] - c[0])).normalize();
+    let inlet = mesh.inlet().unwrap();
+    let inlet_radius = {
+        let ring: Vec<u32> = mesh.node_sets[&sets::wall_end(&inlet.name)]
+            .iter()
+            .copied()
+            .filter(|n| mesh.node_sets[sets::INTERFACE_NODES].binary_search(n).is_ok())
+            .collect();
+        ring.iter().map(|&n| (mesh.nodes[n as usize] - inlet.centre).norm()).sum::<f64>() / ring.len() as f64
+    };
     let mut checked = 0;
     let mut inward = 0;
     let mut min_un = f64::INFINITY;
     let mut mean_un = 0.0;
+    let mut farthest_inward_from_plane: f64 = 0.0;
     for &i in &mesh.node_sets[sets::INTERFACE_NODES] {
         if ends.contains(&i) {
             continue;
@@ -413,14 +458,24 @@ fn branched_y_bifurcation_deck_solves_and_inflates() {
         let un = nalgebra::Vector3::from(u).dot(&normal[&i].normalize());
         min_un = min_un.min(un);
         mean_un += un;
-        inward += usize::from(un <= 0.0);
+        if un <= 0.0 {
+            inward += 1;
+            let off_plane = (mesh.nodes[i as usize] - c[0]).dot(&plane_normal).abs();
+            farthest_inward_from_plane = farthest_inward_from_plane.max(off_plane);
+        }
         checked += 1;
     }
     mean_un /= checked as f64;
     eprintln!(
-        "y-bifurcation: {checked} lumen nodes, {inward} move inwards (min u.n {min_un:.2e} mm), mean u.n {mean_un:.4e} mm"
+        "y-bifurcation: {checked} lumen nodes, {inward} move inwards (min u.n {min_un:.3e} mm, at most \
+         {farthest_inward_from_plane:.3} mm from the bifurcation plane; inlet radius {inlet_radius:.3} mm), \
+         mean u.n {mean_un:.4e} mm"
     );
     assert!(mean_un > 0.0);
-    assert!(inward * 100 <= checked, "{inward} of {checked} lumen nodes move into the lumen");
-    assert!(-min_un < 0.1 * mean_un, "a node moves inwards by {min_un:.2e} mm");
+    assert!(inward * 100 <= 8 * checked, "{inward} of {checked} lumen nodes move into the lumen");
+    assert!(-min_un < 0.5 * mean_un, "a node moves inwards by {min_un:.2e} mm");
+    assert!(
+        farthest_inward_from_plane < 0.65 * inlet_radius,
+        "a node {farthest_inward_from_plane} mm off the bifurcation plane moves inwards"
+    );
 }
