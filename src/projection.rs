@@ -319,6 +319,8 @@ const CLEAR_REACH: f64 = 2.0;
 const CLEAR_TURNS: usize = 12;
 /// A last ordinary section must be followed by this many clear ones, a quarter radius apart.
 const CLEAR_RUN_STEPS: usize = 8;
+/// Distance from a vessel end within which the clear run is not checked, in radii.
+const FAR_END_MARGIN: f64 = 1.5;
 /// How far the folded end's wall points must lie ahead of the last ordinary section, in radii.
 const FOLD_MARGIN: f64 = 0.25;
 /// Largest curvature of the centerline where ordinary sections may stand, times the radius
@@ -384,10 +386,15 @@ pub fn clear_transition_length(
         }) && gentle_bend(d)
             && fold_ahead(d)
     };
+    // The run of clear sections need not reach beyond the branch's own part: up to its middle
+    // when a junction ends it too, else short of its far end, whose sections the vessel end
+    // decides (an open end's rays run out of the lumen).
+    let far_junction = if at_start { branch.end_junction.is_some() } else { branch.start_junction.is_some() };
+    let reach = if far_junction { 0.5 * len } else { len - FAR_END_MARGIN * r };
     let step = 0.25 * r;
     let mut d = estimate;
-    while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len {
-        if (0..=CLEAR_RUN_STEPS).all(|k| clear(d + k as f64 * step)) {
+    while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len && d <= reach {
+        if (0..=CLEAR_RUN_STEPS).map(|k| d + k as f64 * step).filter(|&x| x <= reach).all(clear) {
             return Ok(d);
         }
         d += step;

@@ -190,7 +190,7 @@ pub fn build_volume(
     };
     let surface_nodes = &graph.nodes;
     let nominal: Vec<f64> = surface_nodes.iter().map(|&s| wall_thickness(node_radius[s as usize])).collect();
-    let thickness = crotch_limited_thickness(&nodes, &graph, &dirs, surface, &nominal);
+    let thickness = crotch_limited_thickness(&nodes, &graph, &dirs, surface, &nominal, !junctions.is_empty());
     let mut wall_base = vec![u32::MAX; nodes.len()];
     for ((&s, dir), thickness) in surface_nodes.iter().zip(&dirs).zip(thickness) {
         let p = nodes[s as usize];
@@ -455,13 +455,18 @@ const CONVERGENCE_SHARE: f64 = 0.15;
 
 /// Wall thickness at every lumen-surface node: the nominal one, limited in flow dividers (the
 /// tissue between two branches) to a share of the distance across, and eased towards the
-/// limited nodes over their neighbours so the outer wall stays smooth.
+/// limited nodes over their neighbours so the outer wall stays smooth. The distance across is
+/// probed only in branched vessels (`probe`), where the walls of two branches face each other
+/// from the flow divider on down their first radii; an unbranched vessel's walls face each
+/// other only where it loops onto itself, which its sections would not survive, and one ray
+/// per surface node was a third of the volume stage on long vessels.
 fn crotch_limited_thickness(
     nodes: &[Point3<f64>],
     graph: &SurfaceGraph,
     dirs: &[Vector3<f64>],
     surface: &LumenSurface,
     nominal: &[f64],
+    probe: bool,
 ) -> Vec<f64> {
     let mut factor: Vec<f64> = graph
         .nodes
@@ -469,6 +474,9 @@ fn crotch_limited_thickness(
         .zip(dirs)
         .zip(nominal)
         .map(|((&s, d), &t)| {
+            if !probe {
+                return 1.0;
+            }
             let p = nodes[s as usize];
             // Start a little off the surface so the node's own triangles are not hit.
             let eps = 1e-3 * t;
