@@ -271,7 +271,8 @@ fn real_branched_vessels_mesh_within_the_bars() {
 }
 
 /// Issue 8: a bare branched surface meshes end to end with the centerlines vesselhex computes
-/// itself, and the report names its junction; every bar of the branching issue holds.
+/// itself, through every writer, and the report names its junction; every bar of the branching
+/// issue holds.
 #[test]
 fn bare_branched_surface_meshes_with_computed_centerlines() {
     let Some(v) = vessels_dir() else { return };
@@ -285,9 +286,20 @@ fn bare_branched_surface_meshes_with_computed_centerlines() {
         path_str(&out),
         "--quiet",
         "--formats",
-        "vtu",
+        "vtu,calculix,abaqus,febio,febio-fsi,openfoam,openfoam-fsi,fsi",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in [
+        "mesh.vtu",
+        "calculix/model.inp",
+        "abaqus/model.inp",
+        "febio/wall.feb",
+        "febio/fsi.feb",
+        "openfoam/constant/polyMesh/faces",
+        "fsi/interface_nodes.csv",
+    ] {
+        assert!(out.join(f).is_file(), "bare aortoiliac: {f} missing");
+    }
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(r["branches"].as_array().unwrap().len(), 3);
