@@ -439,6 +439,55 @@ fn wall_clearance_shrink(surface: &LumenSurface, p: &TransitionPoints, template:
 /// Rays of a transition section may run this many times the distance to their guide point.
 const GUIDE_SLACK: f64 = 3.0;
 
+/// Shrinks a transition core about its centre until every boundary node lies at most
+/// CORE_REACH of the way from the centre to its guide point and to the wall in its direction:
+/// where the branch is much narrower than the junction, or the centerline hugs one side of the
+/// lumen, the interpolated core would otherwise come close to the wall or cross it.
+fn keep_core_off_the_wall(
+    p: &mut TransitionPoints,
+    guide_at: &[Point3<f64>],
+    template: &SectionTemplate,
+    surface: &LumenSurface,
+) {
+    let shrink = (0..template.ring_len())
+        .map(|k| {
+            let o = p.core[template.ring_core_index[k]] - p.centre;
+            let g = guide_at[k] - p.centre;
+            let along = o.dot(&g) / g.norm();
+            if along > 0.0 {
+                CORE_REACH * g.norm() / along
+            } else {
+                1.0
+            }
+        })
+        .fold(1.0, f64::min)
+        .min(wall_clearance_shrink(surface, p, template));
+    if shrink < 1.0 {
+        for c in p.core.iter_mut() {
+            *c = p.centre + (*c - p.centre) * shrink;
+        }
+    }
+}
+
+/// Ray targets of a transition section: from each core boundary node through its guide point,
+/// far enough that a guide inside the lumen (a bulb) does not stop the ray short of the wall.
+fn guided_targets(
+    p: &TransitionPoints,
+    guide_at: &[Point3<f64>],
+    template: &SectionTemplate,
+    junction_radius: f64,
+) -> Vec<Point3<f64>> {
+    guide_at
+        .iter()
+        .enumerate()
+        .map(|(k, guide)| {
+            let origin = p.core[template.ring_core_index[k]];
+            let reach = (guide - origin).norm().max(template.ray_reach * junction_radius) * GUIDE_SLACK;
+            origin + (guide - origin).normalize() * (reach / RAY_SLACK)
+        })
+        .collect()
+}
+
 /// The sections of a transition from an ordinary section (excluded) to the folded end
 /// (included), in that order. `sense` is +1 when the junction lies downstream of the section.
 ///
@@ -507,62 +556,34 @@ fn transition(
     // Where the branch's centerline bends close to the junction, the Hermite sections may cut
     // through the wall; the second attempt moves them onto the centerline, less and less
     // towards the fold (where the section is fixed).
-    let attempt = |follow_centerline: bool| -> std::result::Result<Vec<ProjectedSection>, Error> {
-        let mut out = Vec::with_capacity(cells);
-        for (u, p) in params.iter().zip(&points) {
-            let mut p = TransitionPoints { core: p.core.clone(), targets: vec![], centre: p.centre };
-            let shift = if follow_centerline {
-                let s = (station.s + sense * j.transition_length * u).clamp(0.0, length);
-                (branch.at(s).point - p.centre) * (1.0 - u)
-            } else {
-                Vector3::zeros()
-            };
-            p.centre += shift;
-            for c in p.core.iter_mut() {
-                *c += shift;
-            }
-            // Where the branch is much narrower than the junction, the interpolated core would come
-            // close to the wall: shrink it about the section centre until every core boundary point
-            // lies at most CORE_REACH of the way from the centre to its guide.
-            let guide_at: Vec<Point3<f64>> =
-                guides.iter().map(|c| crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, *u) + shift).collect();
-            let shrink = (0..template.ring_len())
-                .map(|k| {
-                    let o = p.core[template.ring_core_index[k]] - p.centre;
-                    let g = guide_at[k] - p.centre;
-                    let along = o.dot(&g) / g.norm();
-                    if along > 0.0 {
-                        CORE_REACH * g.norm() / along
-                    } else {
-                        1.0
-                    }
-                })
-                .fold(1.0, f64::min)
-                .min(wall_clearance_shrink(setup.surface, &p, template));
-            if shrink < 1.0 {
-                for c in p.core.iter_mut() {
-                    *c = p.centre + (*c - p.centre) * shrink;
+    let attempt = |follow_centerline: bool| -> Result<Vec<ProjectedSection>> {
+        params
+            .iter()
+            .zip(&points)
+            .map(|(&u, p)| {
+                let shift = if follow_centerline {
+                    let s = (station.s + sense * j.transition_length * u).clamp(0.0, length);
+                    (branch.at(s).point - p.centre) * (1.0 - u)
+                } else {
+                    Vector3::zeros()
+                };
+                let mut p = TransitionPoints {
+                    core: p.core.iter().map(|c| c + shift).collect(),
+                    targets: vec![],
+                    centre: p.centre + shift,
+                };
+                let guide_at: Vec<Point3<f64>> =
+                    guides.iter().map(|c| crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, u) + shift).collect();
+                keep_core_off_the_wall(&mut p, &guide_at, template, setup.surface);
+                let targets = guided_targets(&p, &guide_at, template, g.radius);
+                let (probe, section) =
+                    cast_rays(template, setup.surface, &sample_at(u, p.centre), p.core, &targets, orient);
+                if !probe.valid() {
+                    return Err(failure(u, &probe));
                 }
-            }
-            let targets: Vec<Point3<f64>> = guides
-                .iter()
-                .enumerate()
-                .map(|(k, _)| {
-                    let guide = guide_at[k];
-                    let origin = p.core[template.ring_core_index[k]];
-                    // A guide inside the lumen (a bulb) must not stop the ray short of the wall.
-                    let reach = (guide - origin).norm().max(template.ray_reach * g.radius) * GUIDE_SLACK;
-                    origin + (guide - origin).normalize() * (reach / RAY_SLACK)
-                })
-                .collect();
-            let (probe, section) =
-                cast_rays(template, setup.surface, &sample_at(*u, p.centre), p.core, &targets, orient);
-            if !probe.valid() {
-                return Err(failure(*u, &probe));
-            }
-            out.push(ProjectedSection { in_junction: true, ..section });
-        }
-        Ok(out)
+                Ok(ProjectedSection { in_junction: true, ..section })
+            })
+            .collect()
     };
     let mut out = match attempt(false) {
         Ok(out) => out,
