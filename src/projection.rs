@@ -399,16 +399,27 @@ pub fn clear_transition_length(
         }
         d += step;
     }
-    Err(Error::Geometry(format!(
-        "{}: branch {} at the junction at ({:.3}, {:.3}, {:.3}) mm: no cross-section within {:.1} mm of the \
-         junction is clear of the other branches (every ray meeting this branch's wall within {CLEAR_REACH} radii). \
-         The branch may be too short, or its centerline leaves the lumen near the junction",
+    let place = format!(
+        "{}: branch {} ({len:.1} mm long) at the junction at ({:.3}, {:.3}, {:.3}) mm",
         setup.surface.source.display(),
         branch.name,
         geometry.centre.x,
         geometry.centre.y,
-        geometry.centre.z,
-        d
+        geometry.centre.z
+    );
+    if estimate > reach {
+        let share =
+            if far_junction { "half of the branch, the other half being its other junction's" } else { "the branch" };
+        return Err(Error::Geometry(format!(
+            "{place}: the junction's transition needs {estimate:.1} mm of it, more than {share} ({reach:.1} mm). \
+             The two junctions are too close for a transition each: raise \
+             centerline.junction_merge_radii so that they merge into one, or mesh a longer stretch of the vessel"
+        )));
+    }
+    Err(Error::Geometry(format!(
+        "{place}: no cross-section within {d:.1} mm of the junction is clear of the other branches (every ray \
+         meeting this branch's wall within {CLEAR_REACH} radii, on a gently bending centerline, behind the \
+         junction's crotches). The branch may be too short, or its centerline leaves the lumen near the junction"
     )))
 }
 
