@@ -373,18 +373,22 @@ pub fn clear_transition_length(
         let towards = if at_start { -st.frame.tangent } else { st.frame.tangent };
         fold_wall.iter().all(|w| (w - st.point).dot(&towards) >= FOLD_MARGIN * r)
     };
+    // The two geometric tests first: they cost nothing next to twelve sets of rays.
     let clear = |d: f64| {
         let base = at(d);
-        (0..CLEAR_TURNS).all(|t| {
-            let phi = spacing_angle * t as f64;
-            let f = base.frame;
-            let normal = f.normal * phi.cos() + f.binormal * phi.sin();
-            let st =
-                CenterlineSample { frame: crate::centerline::Frame::from_tangent_and_hint(f.tangent, normal), ..base };
-            let (probe, sec) = cast_section(setup.template, setup.surface, &st, orient);
-            probe.valid() && sec.surface.iter().all(|p| (p - st.point).norm() <= CLEAR_REACH * st.radius)
-        }) && gentle_bend(d)
+        gentle_bend(d)
             && fold_ahead(d)
+            && (0..CLEAR_TURNS).all(|t| {
+                let phi = spacing_angle * t as f64;
+                let f = base.frame;
+                let normal = f.normal * phi.cos() + f.binormal * phi.sin();
+                let st = CenterlineSample {
+                    frame: crate::centerline::Frame::from_tangent_and_hint(f.tangent, normal),
+                    ..base
+                };
+                let (probe, sec) = cast_section(setup.template, setup.surface, &st, orient);
+                probe.valid() && sec.surface.iter().all(|p| (p - st.point).norm() <= CLEAR_REACH * st.radius)
+            })
     };
     // The run of clear sections need not reach beyond the branch's own part: up to its middle
     // when a junction ends it too, else short of its far end, whose sections the vessel end
