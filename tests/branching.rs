@@ -278,33 +278,10 @@ fn bare_branched_surface_meshes_with_computed_centerlines() {
     let Some(v) = vessels_dir() else { return };
     let out = temp_dir("bare-aortoiliac");
     let surface = v.join("vmtk_aortoiliac/aorta-surface-open-ends.stl");
-    let o = vesselhex(&[
-        "mesh",
-        "--surface",
-        path_str(&surface),
-        "--output",
-        path_str(&out),
-        "--quiet",
-        "--formats",
-        "vtu,calculix,abaqus,febio,febio-fsi,openfoam,openfoam-fsi,fsi",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    for f in [
-        "mesh.vtu",
-        "calculix/model.inp",
-        "abaqus/model.inp",
-        "febio/wall.feb",
-        "febio/fsi.feb",
-        "openfoam/constant/polyMesh/faces",
-        "fsi/interface_nodes.csv",
-    ] {
-        assert!(out.join(f).is_file(), "bare aortoiliac: {f} missing");
-    }
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let r = mesh_surface_through_every_writer(&surface, &out, &[]);
     assert_eq!(r["branches"].as_array().unwrap().len(), 3);
     assert_eq!(r["junctions"].as_array().unwrap().len(), 1);
-    let f = |p: &str| r.pointer(p).and_then(|v| v.as_f64()).unwrap_or_else(|| panic!("no {p}"));
+    let f = |p: &str| report_number(&r, p);
     let min_sj = f("/lumen/scaled_jacobian/min").min(f("/wall/scaled_jacobian/min"));
     eprintln!(
         "bare aortoiliac: {} hexes, min SJ {min_sj:.3}, wall mean {:.3}, lumen skew mean {:.3}",

@@ -415,33 +415,8 @@ fn rounded_cap_aorta_meshes_through_every_writer_with_given_ends() {
     let Some(v) = vessels_dir() else { return };
     let surface = v.join("vmtk_abdominal_aorta_segment/aorta-surface-segment-2.stl");
     let out = temp_dir("aorta-ends");
-    let o = vesselhex(&[
-        "mesh",
-        "--surface",
-        path_str(&surface),
-        "--ends",
-        "219.5,152,26.5",
-        "216.5,285,25.5",
-        "--formats",
-        "vtu,calculix,abaqus,febio,febio-fsi,openfoam,openfoam-fsi,fsi",
-        "--output",
-        path_str(&out),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    for f in [
-        "mesh.vtu",
-        "calculix/model.inp",
-        "abaqus/model.inp",
-        "febio/wall.feb",
-        "febio/fsi.feb",
-        "fsi/interface_nodes.csv",
-    ] {
-        assert!(out.join(f).is_file(), "{f} missing");
-    }
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
-    let f = |p: &str| r.pointer(p).and_then(|x| x.as_f64()).unwrap_or_else(|| panic!("no {p}"));
+    let r = mesh_surface_through_every_writer(&surface, &out, &["--ends", "219.5,152,26.5", "216.5,285,25.5"]);
+    let f = |p: &str| report_number(&r, p);
     let min_sj = f("/lumen/scaled_jacobian/min").min(f("/wall/scaled_jacobian/min"));
     eprintln!(
         "aorta segment with --ends: {} hexes, min SJ {min_sj:.3}, wall mean {:.3}, lumen skew {:.3}, node->surface max {:.1e} um",

@@ -75,6 +75,37 @@ pub fn mesh_cli(surface: &Path, centerlines: &Path, out: &Path, extra: &[&str]) 
     serde_json::from_str(&text).unwrap()
 }
 
+/// Every writer, as `--formats` names them.
+pub const EVERY_FORMAT: &str = "vtu,calculix,abaqus,febio,febio-fsi,openfoam,openfoam-fsi,fsi";
+
+/// Runs `vesselhex mesh --surface SURFACE` (centerlines computed by vesselhex) with `extra`
+/// arguments through every writer into `out`, checks that each writer's main file is there, and
+/// returns the parsed report; panics with stderr on failure.
+pub fn mesh_surface_through_every_writer(surface: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let mut args =
+        vec!["mesh", "--surface", path_str(surface), "--formats", EVERY_FORMAT, "--output", path_str(out), "--quiet"];
+    args.extend_from_slice(extra);
+    let o = vesselhex(&args);
+    assert!(o.status.success(), "{}: {}", surface.display(), String::from_utf8_lossy(&o.stderr));
+    for f in [
+        "mesh.vtu",
+        "calculix/model.inp",
+        "abaqus/model.inp",
+        "febio/wall.feb",
+        "febio/fsi.feb",
+        "openfoam/constant/polyMesh/faces",
+        "fsi/interface_nodes.csv",
+    ] {
+        assert!(out.join(f).is_file(), "{}: {f} missing", surface.display());
+    }
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+/// A number of a report, by JSON pointer; panics naming the pointer when it is missing.
+pub fn report_number(report: &serde_json::Value, pointer: &str) -> f64 {
+    report.pointer(pointer).and_then(|v| v.as_f64()).unwrap_or_else(|| panic!("report has no {pointer}"))
+}
+
 /// A Python interpreter with `module` importable, or None outside CI (skipped); under CI a
 /// missing module is a failure.
 pub fn python_with(module: &str) -> Option<String> {
