@@ -2,36 +2,15 @@
 //! (`vesselhex::synthetic`). Regenerate them with
 //! `cargo test --test synthetic regenerate_fixtures -- --ignored`.
 
+mod common;
+
+use common::{assert_same_as_committed, fixtures_dir, ScratchDir};
 use nalgebra::{Point3, Vector3};
 use std::collections::HashMap;
 use std::fs;
-use std::path::{Path, PathBuf};
 use vesselhex::synthetic::{
-    all_fixtures, centerline_abscissae, chordal_tolerance, fixture_paths, write_all_fixtures,
-    AnalyticVessel, Facing,
+    all_fixtures, centerline_abscissae, chordal_tolerance, fixture_paths, write_all_fixtures, AnalyticVessel, Facing,
 };
-
-fn fixtures_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures")
-}
-
-/// A scratch directory removed on drop.
-struct ScratchDir(PathBuf);
-
-impl ScratchDir {
-    fn new(tag: &str) -> Self {
-        let dir =
-            std::env::temp_dir().join(format!("vesselhex-synthetic-{}-{tag}", std::process::id()));
-        let _ = fs::remove_dir_all(&dir);
-        ScratchDir(dir)
-    }
-}
-
-impl Drop for ScratchDir {
-    fn drop(&mut self) {
-        let _ = fs::remove_dir_all(&self.0);
-    }
-}
 
 /// The committed STL of a fixture, read by `stl_io` (vertices welded by exact f32 equality).
 fn read_committed_stl(v: &dyn AnalyticVessel) -> stl_io::IndexedMesh {
@@ -60,13 +39,7 @@ fn regenerated_fixtures_are_byte_identical_to_the_committed_ones() {
     let scratch = ScratchDir::new("regen");
     let written = write_all_fixtures(&scratch.0).unwrap();
     assert_eq!(written.len(), 2 * all_fixtures().len());
-    for path in written {
-        let name = path.file_name().unwrap();
-        let committed = fixtures_dir().join(name);
-        let fresh = fs::read(&path).unwrap();
-        let old = fs::read(&committed).unwrap_or_else(|e| panic!("{}: {e}", committed.display()));
-        assert!(fresh == old, "{} differs from a fresh generation", committed.display());
-    }
+    assert_same_as_committed(&written);
     let left: Vec<_> = fs::read_dir(&scratch.0).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(left.len(), 2 * all_fixtures().len(), "temporary files left behind: {left:?}");
 }
@@ -180,8 +153,7 @@ fn closed_fixtures_are_watertight_and_open_ones_have_two_end_loops() {
                 .iter()
                 .map(|lp| {
                     assert_eq!(lp.len(), v.resolution().circumferential, "{}", v.name());
-                    let s: Vec<f64> =
-                        lp.iter().map(|&i| v.closest_abscissa(&vertex(&mesh, i))).collect();
+                    let s: Vec<f64> = lp.iter().map(|&i| v.closest_abscissa(&vertex(&mesh, i))).collect();
                     assert!(s.iter().all(|x| (x - s[0]).abs() < 1e-5), "{}: {s:?}", v.name());
                     s[0]
                 })

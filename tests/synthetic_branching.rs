@@ -4,10 +4,13 @@
 //! `cargo test --release --test synthetic_branching regenerate_branching_fixtures -- --ignored`
 //! (or `vesselhex fixtures --output fixtures`).
 
+mod common;
+
+use common::{assert_same_as_committed, fixtures_dir, ScratchDir};
 use nalgebra::{Point3, Vector3};
 use std::collections::{HashMap, HashSet};
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::OnceLock;
 use std::time::Instant;
 use vesselhex::input::{read_centerlines, read_surface_with_report, Centerlines};
@@ -18,27 +21,6 @@ use vesselhex::synthetic_branching::{
 };
 use vesselhex::units::LengthUnit;
 use vesselhex::Error;
-
-fn fixtures_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures")
-}
-
-/// A scratch directory removed on drop.
-struct ScratchDir(PathBuf);
-
-impl ScratchDir {
-    fn new(tag: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("vesselhex-branching-{}-{tag}", std::process::id()));
-        let _ = fs::remove_dir_all(&dir);
-        ScratchDir(dir)
-    }
-}
-
-impl Drop for ScratchDir {
-    fn drop(&mut self) {
-        let _ = fs::remove_dir_all(&self.0);
-    }
-}
 
 /// A surface as the mesher reads it (binary STL through `vesselhex::input`, f32 vertices welded).
 struct Mesh {
@@ -315,13 +297,7 @@ fn regenerated_fixtures_are_byte_identical_to_the_committed_ones() {
     let scratch = ScratchDir::new("regen");
     let written = write_all_branching_fixtures(&scratch.0).unwrap();
     assert_eq!(written.len(), 2 * default_branching_fixtures().unwrap().len());
-    for path in written {
-        let name = path.file_name().unwrap();
-        let committed = fixtures_dir().join(name);
-        let fresh = fs::read(&path).unwrap();
-        let old = fs::read(&committed).unwrap_or_else(|e| panic!("{}: {e}", committed.display()));
-        assert!(fresh == old, "{} differs from a fresh generation", committed.display());
-    }
+    assert_same_as_committed(&written);
     let leftovers: Vec<_> = fs::read_dir(&scratch.0)
         .unwrap()
         .map(|e| e.unwrap().file_name())

@@ -75,6 +75,38 @@ pub fn mesh_cli(surface: &Path, centerlines: &Path, out: &Path, extra: &[&str]) 
     serde_json::from_str(&text).unwrap()
 }
 
+/// The committed fixtures.
+pub fn fixtures_dir() -> PathBuf {
+    crate_dir().join("fixtures")
+}
+
+/// A scratch directory removed on drop (not created: the writers under test create it).
+pub struct ScratchDir(pub PathBuf);
+
+impl ScratchDir {
+    pub fn new(tag: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("vesselhex-scratch-{}-{tag}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        ScratchDir(dir)
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Every freshly generated fixture file equals the committed file of the same name, byte for byte.
+pub fn assert_same_as_committed(written: &[PathBuf]) {
+    for path in written {
+        let committed = fixtures_dir().join(path.file_name().unwrap());
+        let fresh = std::fs::read(path).unwrap();
+        let old = std::fs::read(&committed).unwrap_or_else(|e| panic!("{}: {e}", committed.display()));
+        assert!(fresh == old, "{} differs from a fresh generation", committed.display());
+    }
+}
+
 /// Every writer, as `--formats` names them.
 pub const EVERY_FORMAT: &str = "vtu,calculix,abaqus,febio,febio-fsi,openfoam,openfoam-fsi,fsi";
 
