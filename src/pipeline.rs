@@ -55,7 +55,7 @@ fn plan_branches(
         .map(|(b, branch)| {
             let mut branch = branch.clone();
             let len = branch.length();
-            let at_junction = |j: Option<usize>, at_start: bool| -> Result<Option<(usize, usize, f64)>> {
+            let at_junction = |j: Option<usize>, at_start: bool| -> Result<Option<(usize, usize, Option<f64>)>> {
                 j.map(|j| {
                     let g = &junctions[j];
                     let slot = g.slot_of(b);
@@ -63,8 +63,23 @@ fn plan_branches(
                 })
                 .transpose()
             };
-            let start = at_junction(branch.start_junction, true)?;
-            let end = at_junction(branch.end_junction, false)?;
+            let mut start = at_junction(branch.start_junction, true)?;
+            let mut end = at_junction(branch.end_junction, false)?;
+            // A bridge (no clear section near one of its junctions, or too little room left
+            // between the two for ordinary sections): both transitions meet in the middle.
+            if let (Some(a), Some(b)) = (&mut start, &mut end) {
+                let room = match (a.2, b.2) {
+                    (Some(x), Some(y)) => len - x - y,
+                    _ => 0.0,
+                };
+                let ends = branch.samples[0].radius + branch.samples[branch.samples.len() - 1].radius;
+                if room < MIN_ORDINARY_STRETCH * ends {
+                    (a.2, b.2) = (Some(0.5 * len), Some(0.5 * len));
+                }
+            }
+            let start =
+                start.map(|(j, slot, l)| (j, slot, l.expect("only a branch between two junctions is a bridge")));
+            let end = end.map(|(j, slot, l)| (j, slot, l.expect("only a branch between two junctions is a bridge")));
             let turn_needed = |s: f64, j: usize, q: u8| {
                 let f = branch.at(s).frame;
                 let want = fold_normal(&junctions[j].axis, &f.tangent, q);
@@ -111,6 +126,10 @@ fn plan_branches(
         })
         .collect()
 }
+
+/// Least stretch of ordinary sections between two junctions' transitions, in end radii (the
+/// sum of the branch's two end radii); less, and the branch is a bridge.
+const MIN_ORDINARY_STRETCH: f64 = 0.25;
 
 /// Radius and surface distance must agree to within this factor, or the units differ.
 const UNIT_MISMATCH_FACTOR: f64 = 8.0;

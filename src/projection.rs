@@ -69,6 +69,7 @@ pub struct ProjectedBranch {
 }
 
 /// A junction end of a branch, as the projection needs it.
+#[derive(Clone, Copy)]
 pub struct JunctionEnd<'a> {
     pub geometry: &'a JunctionGeometry,
     pub fold: FoldEnd,
@@ -184,19 +185,28 @@ pub fn project_branch(
     let lo = start_junction.map_or(0.0, |j| j.transition_length);
     let hi = end_junction.map_or(length, |j| length - j.transition_length);
     let name = &branch.name;
-    if hi - lo < 0.25 * (samples[0].radius + samples[samples.len() - 1].radius) {
-        let what = match (start_junction, end_junction) {
-            (Some(_), Some(_)) => "between its two junctions",
-            (Some(_), None) => "between its junction and its outlet",
-            (None, Some(_)) => "between the inlet and its junction",
-            (None, None) => "",
-        };
+    if let (Some(a), Some(b)) = (start_junction, end_junction) {
+        if is_bridge(lo, hi, length) {
+            return Ok(ProjectedBranch {
+                branch: index,
+                sections: bridge(a, b, &branch.at(lo), setup, branch)?,
+                s_start: lo,
+                s_end: lo,
+                start: BranchEnd::Fold(a.fold),
+                end: BranchEnd::Fold(b.fold),
+                inlet_closed: false,
+                outlet_closed: false,
+                normals_outward,
+            });
+        }
+    }
+    // Whether the sections past a transition suffice is decided below, on the clean ones.
+    if hi <= lo {
         return Err(Error::Geometry(format!(
-            "{}: branch {name} is too short {what} ({length:.2} mm long, {:.2} mm needed for the junctions' \
-             transitions): the junctions should be merged (centerline.junction_merge_radii) or the branch is \
-             not a vessel",
+            "{}: branch {name} ({length:.2} mm long) ends within its junction's transition ({:.2} mm): mesh a longer \
+             stretch of the vessel",
             surface.source.display(),
-            length - (hi - lo) + 0.0
+            lo.max(length - hi)
         )));
     }
     // Only the samples away from junctions decide where a vessel end is clean.
@@ -204,10 +214,12 @@ pub fn project_branch(
     let probes: Vec<(usize, Probe)> =
         inside.par_iter().map(|&i| (i, cast_section(template, surface, &samples[i], orient).0)).collect();
 
-    let first_clean = probes.iter().find(|(_, p)| p.clean()).map(|(i, _)| *i);
-    let last_clean = probes.iter().rev().find(|(_, p)| p.clean()).map(|(i, _)| *i);
+    // A junction end needs no clean section (no cap can be there): every section is checked
+    // valid below.
+    let first_clean = probes.iter().find(|(_, p)| p.clean() || start_junction.is_some()).map(|(i, _)| *i);
+    let last_clean = probes.iter().rev().find(|(_, p)| p.clean() || end_junction.is_some()).map(|(i, _)| *i);
     let (i0, i1) = match (first_clean, last_clean) {
-        (Some(a), Some(b)) if a < b => (a, b),
+        (Some(a), Some(b)) if a < b || (a == b && (start_junction.is_some() || end_junction.is_some())) => (a, b),
         _ => {
             let mid = &samples[samples.len() / 2];
             let p = cast_section(template, surface, mid, orient).0;
@@ -251,7 +263,11 @@ pub fn project_branch(
             p.from_outside
         )));
     }
-    if s_end - s_start < 0.5 * (r0 + r1) {
+    // A vessel end too close to its junction for a stretch of ordinary sections (a short branch
+    // clipped obliquely): the transition runs on to the end's section, the only ordinary one.
+    let stub =
+        start_junction.is_some() != end_junction.is_some() && s_end > s_start && s_end - s_start < 0.5 * (r0 + r1);
+    if s_end - s_start < 0.5 * (r0 + r1) && !stub {
         return Err(Error::Geometry(format!(
             "{}: only {:.3} mm of branch {name} (from {:.2} to {:.2} mm) has clean cross-sections, too short to \
              mesh; reduce centerline.trim_inlet/trim_outlet or check the surface's ends",
@@ -262,7 +278,17 @@ pub fn project_branch(
         )));
     }
 
-    let positions = crate::blocks::station_positions(s_start, s_end, |s| spacing(&branch.at(s)));
+    let (s_start, s_end) = match (stub, start_junction.is_some()) {
+        (false, _) => (s_start, s_end),
+        (true, true) => (s_end, s_end),
+        (true, false) => (s_start, s_start),
+    };
+    let start_junction = start_junction
+        .map(|j| JunctionEnd { transition_length: if stub { s_start } else { j.transition_length }, ..*j });
+    let end_junction = end_junction
+        .map(|j| JunctionEnd { transition_length: if stub { length - s_end } else { j.transition_length }, ..*j });
+    let positions =
+        if stub { vec![s_start] } else { crate::blocks::station_positions(s_start, s_end, |s| spacing(&branch.at(s))) };
     let sections: Vec<(Probe, ProjectedSection)> =
         positions.par_iter().map(|&s| cast_section(template, surface, &branch.at(s), orient)).collect();
     let mut ordinary = Vec::with_capacity(sections.len());
@@ -281,13 +307,13 @@ pub fn project_branch(
     }
 
     let mut out = Vec::new();
-    if let Some(j) = start_junction {
+    if let Some(j) = &start_junction {
         let mut t = transition(j, &ordinary[0], -1.0, setup, branch)?;
         t.reverse();
         out.extend(t);
     }
     out.extend(ordinary);
-    if let Some(j) = end_junction {
+    if let Some(j) = &end_junction {
         let last = out[out.len() - 1].clone();
         out.extend(transition(j, &last, 1.0, setup, branch)?);
     }
@@ -312,6 +338,11 @@ pub fn project_branch(
     })
 }
 
+/// Whether the transitions of a branch between two junctions meet in its middle (see [`bridge`]).
+fn is_bridge(lo: f64, hi: f64, length: f64) -> bool {
+    hi - lo <= 1e-9 * length
+}
+
 /// A section clears a junction when its rays all meet the wall from inside within this many
 /// local radii of the centerline (a ray that runs further has found a neighbouring branch).
 const CLEAR_REACH: f64 = 2.0;
@@ -321,6 +352,8 @@ const CLEAR_TURNS: usize = 12;
 const CLEAR_RUN_STEPS: usize = 8;
 /// Distance from a vessel end within which the clear run is not checked, in radii.
 const FAR_END_MARGIN: f64 = 1.5;
+/// Least distance between a junction's last ordinary section and a vessel end, in radii.
+const OUTLET_KEEP: f64 = 0.25;
 /// How far the folded end's wall points must lie ahead of the last ordinary section, in radii.
 const FOLD_MARGIN: f64 = 0.25;
 /// Largest curvature of the centerline where ordinary sections may stand, times the radius
@@ -333,17 +366,27 @@ const CLEAR_SEARCH: f64 = 6.0;
 
 /// The distance from a junction's centre, along a branch, of its last ordinary section: the
 /// geometric estimate of [`crate::junction::transition_length`], moved away from the junction
-/// until the section and the next radius of the branch are clear of the other branches.
+/// until the section and the next radius of the branch are clear of the other branches. None
+/// when the branch runs to another junction and no section of this junction's half of it is
+/// clear: the two transitions then meet in the middle (see [`bridge`]).
 pub fn clear_transition_length(
     geometry: &JunctionGeometry,
     slot: usize,
     branch: &Branch,
     at_start: bool,
     setup: &ProjectionSetup,
-) -> Result<f64> {
-    let estimate = crate::junction::transition_length(geometry, slot);
+) -> Result<Option<f64>> {
     let r = geometry.slots[slot].radius;
     let len = branch.length();
+    let far_junction = if at_start { branch.end_junction.is_some() } else { branch.start_junction.is_some() };
+    // The run of clear sections need not reach beyond the branch's own part: up to its middle
+    // when a junction ends it too, else short of its far end, whose sections the vessel end
+    // decides (an open end's rays run out of the lumen). Towards a vessel end the last ordinary
+    // section itself may stand closer: whether clean sections remain past it is decided by
+    // project_branch (a short branch keeps only its end's section).
+    let (run_reach, reach) =
+        if far_junction { (0.5 * len, 0.5 * len) } else { (len - FAR_END_MARGIN * r, len - OUTLET_KEEP * r) };
+    let estimate = crate::junction::transition_length(geometry, slot);
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     let at = |d: f64| branch.at(if at_start { d } else { len - d });
     // The frames are turned afterwards to meet the junctions, so rays are tried at several
@@ -390,18 +433,17 @@ pub fn clear_transition_length(
                 probe.valid() && sec.surface.iter().all(|p| (p - st.point).norm() <= CLEAR_REACH * st.radius)
             })
     };
-    // The run of clear sections need not reach beyond the branch's own part: up to its middle
-    // when a junction ends it too, else short of its far end, whose sections the vessel end
-    // decides (an open end's rays run out of the lumen).
-    let far_junction = if at_start { branch.end_junction.is_some() } else { branch.start_junction.is_some() };
-    let reach = if far_junction { 0.5 * len } else { len - FAR_END_MARGIN * r };
     let step = 0.25 * r;
     let mut d = estimate;
     while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len && d <= reach {
-        if (0..=CLEAR_RUN_STEPS).map(|k| d + k as f64 * step).filter(|&x| x <= reach).all(clear) {
-            return Ok(d);
+        if (0..=CLEAR_RUN_STEPS).map(|k| d + k as f64 * step).filter(|&x| x == d || x <= run_reach).all(clear) {
+            return Ok(Some(d));
         }
         d += step;
+    }
+    // Between two junctions, no clear section in this junction's half: the branch is a bridge.
+    if far_junction {
+        return Ok(None);
     }
     let place = format!(
         "{}: branch {} ({len:.1} mm long) at the junction at ({:.3}, {:.3}, {:.3}) mm",
@@ -412,12 +454,9 @@ pub fn clear_transition_length(
         geometry.centre.z
     );
     if estimate > reach {
-        let share =
-            if far_junction { "half of the branch, the other half being its other junction's" } else { "the branch" };
         return Err(Error::Geometry(format!(
-            "{place}: the junction's transition needs {estimate:.1} mm of it, more than {share} ({reach:.1} mm). \
-             The two junctions are too close for a transition each: raise \
-             centerline.junction_merge_radii so that they merge into one, or mesh a longer stretch of the vessel"
+            "{place}: the junction's transition needs {estimate:.1} mm of it, more than the branch leaves before its \
+             end ({reach:.1} mm): the branch ends too close to the junction. Mesh a longer stretch of the vessel"
         )));
     }
     Err(Error::Geometry(format!(
@@ -503,78 +542,130 @@ fn guided_targets(
         .collect()
 }
 
-/// The sections of a transition from an ordinary section (excluded) to the folded end
-/// (included), in that order. `sense` is +1 when the junction lies downstream of the section.
-///
-/// The folded section's rays stay in their pages. In between, a ray aimed at its target could
-/// cross the still-common lumen into the neighbouring branch; so each ray is aimed instead at a
-/// guide point on a Hermite curve between its surface nodes on the ordinary and on the folded
-/// section, which keeps it on its own branch's side of the crotch.
-fn transition(
+/// Why a transition section failed, naming the junction and the branch.
+fn transition_failure(setup: &ProjectionSetup, branch: &Branch, g: &JunctionGeometry, u: f64, probe: &Probe) -> Error {
+    Error::Geometry(format!(
+        "{}: branch {} at the junction at ({:.3}, {:.3}, {:.3}) mm: in the transition section {:.0} % of the way to \
+         the junction, {} of {} rays miss the lumen wall and {} meet it from outside. The branches leave the \
+         junction at a shape the book of pages cannot follow (a bulb or a stenosis at the junction); smooth the \
+         centerlines or lengthen the transition (mesh the junction finer)",
+        setup.surface.source.display(),
+        branch.name,
+        g.centre.x,
+        g.centre.y,
+        g.centre.z,
+        u * 100.0,
+        probe.misses,
+        setup.template.ring_len(),
+        probe.from_outside
+    ))
+}
+
+/// A transition's folded end, cast, and the core points of the sections before it.
+struct FoldCast {
+    /// Parameters of the sections from the ordinary section (0, excluded) to the fold (1, excluded).
+    params: Vec<f64>,
+    points: Vec<TransitionPoints>,
+    fold: ProjectedSection,
+}
+
+/// The station of a transition section at parameter `u` from `station` towards the junction.
+fn transition_sample(
     j: &JunctionEnd,
-    ordinary: &ProjectedSection,
+    station: &CenterlineSample,
+    sense: f64,
+    u: f64,
+    centre: Point3<f64>,
+) -> CenterlineSample {
+    CenterlineSample {
+        s: station.s + sense * j.transition_length * u,
+        point: centre,
+        radius: station.radius + (j.geometry.radius - station.radius) * u,
+        frame: station.frame,
+    }
+}
+
+/// Casts the folded end of a transition leaving `station` (`sense` +1 when the junction lies
+/// downstream of it) and places the cores of the sections in between.
+fn cast_fold(
+    j: &JunctionEnd,
+    station: &CenterlineSample,
     sense: f64,
     setup: &ProjectionSetup,
     branch: &Branch,
-) -> Result<Vec<ProjectedSection>> {
+) -> Result<FoldCast> {
     let template = setup.template;
-    let g = j.geometry;
-    let station = &ordinary.station;
     let towards = station.frame.tangent * sense;
     let h = (setup.spacing)(station);
     let cells = ((j.transition_length / h).round() as usize).max(2);
-    let params: Vec<f64> = (1..=cells).map(|i| i as f64 / cells as f64).collect();
-    let points = transition_points(g, &j.fold, template, station, &towards, &params);
+    let mut params: Vec<f64> = (1..=cells).map(|i| i as f64 / cells as f64).collect();
+    let mut points = transition_points(j.geometry, &j.fold, template, station, &towards, &params);
+    params.pop();
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
-    let failure = |u: f64, probe: &Probe| {
-        Error::Geometry(format!(
-            "{}: branch {} at the junction at ({:.3}, {:.3}, {:.3}) mm: in the transition section {:.0} % of the \
-             way to the junction, {} of {} rays miss the lumen wall and {} meet it from outside. The branches \
-             leave the junction at a shape the book of pages cannot follow (a bulb or a stenosis at the \
-             junction); smooth the centerlines or lengthen the transition (mesh the junction finer)",
-            setup.surface.source.display(),
-            branch.name,
-            g.centre.x,
-            g.centre.y,
-            g.centre.z,
-            u * 100.0,
-            probe.misses,
-            template.ring_len(),
-            probe.from_outside
-        ))
-    };
-    let sample_at = |u: f64, centre: Point3<f64>| CenterlineSample {
-        s: station.s + sense * j.transition_length * u,
-        point: centre,
-        radius: station.radius + (g.radius - station.radius) * u,
-        frame: station.frame,
-    };
-    let mut points = points;
     let fold_points = points.pop().expect("at least two transition sections");
-    let (probe, fold) =
-        cast_rays(template, setup.surface, &sample_at(1.0, g.centre), fold_points.core, &fold_points.targets, orient);
+    let at_fold = transition_sample(j, station, sense, 1.0, j.geometry.centre);
+    let (probe, fold) = cast_rays(template, setup.surface, &at_fold, fold_points.core, &fold_points.targets, orient);
     if !probe.valid() {
-        return Err(failure(1.0, &probe));
+        return Err(transition_failure(setup, branch, j.geometry, 1.0, &probe));
     }
-    // Guide curves: from each ordinary surface node, leaving along the branch, to its folded
-    // node, arriving as the fold's core does.
-    let guides: Vec<_> = (0..template.ring_len())
-        .map(|k| {
-            let xy = template.core[template.ring_core_index[k]];
-            let turned = crate::junction::turn(j.fold.quarter_turns, &xy);
-            let (p0, p1) = (ordinary.surface[k], fold.surface[k]);
-            let chord = (p1 - p0).norm();
-            (p0, towards * chord, p1, g.arrival(j.fold.slot, &turned, template.core_size) * chord)
-        })
-        .collect();
+    Ok(FoldCast { params, points, fold: ProjectedSection { in_junction: true, ..fold } })
+}
+
+/// Direction in which a transition arrives at the fold at its ring node `k`.
+fn fold_arrival(j: &JunctionEnd, template: &SectionTemplate, k: usize) -> Vector3<f64> {
+    let xy = template.core[template.ring_core_index[k]];
+    let turned = crate::junction::turn(j.fold.quarter_turns, &xy);
+    j.geometry.arrival(j.fold.slot, &turned, template.core_size)
+}
+
+/// A guide curve (Hermite end points and tangents) for each ring node.
+type GuideCurve = (Point3<f64>, Vector3<f64>, Point3<f64>, Vector3<f64>);
+
+fn on_guide(c: &GuideCurve, u: f64) -> Point3<f64> {
+    crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, u)
+}
+
+/// Casts one transition section: the core kept off the wall, each ray aimed through its guide point.
+fn guided_section(
+    mut p: TransitionPoints,
+    guide_at: &[Point3<f64>],
+    sample: CenterlineSample,
+    j: &JunctionEnd,
+    setup: &ProjectionSetup,
+) -> (Probe, ProjectedSection) {
+    let orient = if setup.normals_outward { 1.0 } else { -1.0 };
+    keep_core_off_the_wall(&mut p, guide_at, setup.template, setup.surface);
+    let targets = guided_targets(&p, guide_at, setup.template, j.geometry.radius);
+    let (probe, section) = cast_rays(
+        setup.template,
+        setup.surface,
+        &CenterlineSample { point: p.centre, ..sample },
+        p.core,
+        &targets,
+        orient,
+    );
+    (probe, ProjectedSection { in_junction: true, ..section })
+}
+
+/// The sections strictly between `station` and the fold, each ray aimed at `guide(k, u)`.
+///
+/// Where the branch's centerline bends close to the junction, the Hermite sections may cut
+/// through the wall; the second attempt moves them onto the centerline, less and less towards
+/// the fold (where the section is fixed).
+fn transition_sections(
+    j: &JunctionEnd,
+    station: &CenterlineSample,
+    sense: f64,
+    cast: &FoldCast,
+    guide: &(dyn Fn(usize, f64) -> Point3<f64> + Sync),
+    setup: &ProjectionSetup,
+    branch: &Branch,
+) -> Result<Vec<ProjectedSection>> {
     let length = branch.length();
-    // Where the branch's centerline bends close to the junction, the Hermite sections may cut
-    // through the wall; the second attempt moves them onto the centerline, less and less
-    // towards the fold (where the section is fixed).
     let attempt = |follow_centerline: bool| -> Result<Vec<ProjectedSection>> {
-        params
+        cast.params
             .iter()
-            .zip(&points)
+            .zip(&cast.points)
             .map(|(&u, p)| {
                 let shift = if follow_centerline {
                     let s = (station.s + sense * j.transition_length * u).clamp(0.0, length);
@@ -582,28 +673,95 @@ fn transition(
                 } else {
                     Vector3::zeros()
                 };
-                let mut p = TransitionPoints {
+                let moved = TransitionPoints {
                     core: p.core.iter().map(|c| c + shift).collect(),
                     targets: vec![],
                     centre: p.centre + shift,
                 };
-                let guide_at: Vec<Point3<f64>> =
-                    guides.iter().map(|c| crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, u) + shift).collect();
-                keep_core_off_the_wall(&mut p, &guide_at, template, setup.surface);
-                let targets = guided_targets(&p, &guide_at, template, g.radius);
+                let guide_at: Vec<Point3<f64>> = (0..setup.template.ring_len()).map(|k| guide(k, u) + shift).collect();
                 let (probe, section) =
-                    cast_rays(template, setup.surface, &sample_at(u, p.centre), p.core, &targets, orient);
+                    guided_section(moved, &guide_at, transition_sample(j, station, sense, u, p.centre), j, setup);
                 if !probe.valid() {
-                    return Err(failure(u, &probe));
+                    return Err(transition_failure(setup, branch, j.geometry, u, &probe));
                 }
-                Ok(ProjectedSection { in_junction: true, ..section })
+                Ok(section)
             })
             .collect()
     };
-    let mut out = match attempt(false) {
-        Ok(out) => out,
-        Err(first) => attempt(true).map_err(|_| first)?,
-    };
-    out.push(ProjectedSection { in_junction: true, ..fold });
+    match attempt(false) {
+        Ok(out) => Ok(out),
+        Err(first) => attempt(true).map_err(|_| first),
+    }
+}
+
+/// The sections of a transition from an ordinary section (excluded) to the folded end
+/// (included), in that order. `sense` is +1 when the junction lies downstream of the section.
+///
+/// The folded section's rays stay in their pages. In between, a ray aimed at its target could
+/// cross the still-common lumen into the neighbouring branch; so each ray is aimed instead at a
+/// guide point on a Hermite curve between its surface nodes on the ordinary and on the folded
+/// section (leaving along the branch, arriving as the fold's core does), which keeps it on its
+/// own branch's side of the crotch.
+fn transition(
+    j: &JunctionEnd,
+    ordinary: &ProjectedSection,
+    sense: f64,
+    setup: &ProjectionSetup,
+    branch: &Branch,
+) -> Result<Vec<ProjectedSection>> {
+    let station = &ordinary.station;
+    let towards = station.frame.tangent * sense;
+    let cast = cast_fold(j, station, sense, setup, branch)?;
+    let guides: Vec<GuideCurve> = (0..setup.template.ring_len())
+        .map(|k| {
+            let (p0, p1) = (ordinary.surface[k], cast.fold.surface[k]);
+            let chord = (p1 - p0).norm();
+            (p0, towards * chord, p1, fold_arrival(j, setup.template, k) * chord)
+        })
+        .collect();
+    let mut out = transition_sections(j, station, sense, &cast, &|k, u| on_guide(&guides[k], u), setup, branch)?;
+    out.push(cast.fold);
+    Ok(out)
+}
+
+/// A branch between two junctions too close for a transition and ordinary sections each (the
+/// aortic arch between its branches): one section in the middle, `station`, and the two
+/// transitions from it, with no ordinary section. That middle section stands inside the
+/// junctions' common lumen (its plain rays would escape into a branch), so every ray of the
+/// bridge, the middle's included, is guided by one Hermite curve from its node on the upstream
+/// fold to its node on the downstream fold. Sections from the upstream fold to the downstream one.
+fn bridge(
+    start: &JunctionEnd,
+    end: &JunctionEnd,
+    station: &CenterlineSample,
+    setup: &ProjectionSetup,
+    branch: &Branch,
+) -> Result<Vec<ProjectedSection>> {
+    let template = setup.template;
+    let up = cast_fold(start, station, -1.0, setup, branch)?;
+    let down = cast_fold(end, station, 1.0, setup, branch)?;
+    let guides: Vec<GuideCurve> = (0..template.ring_len())
+        .map(|k| {
+            let (p0, p1) = (up.fold.surface[k], down.fold.surface[k]);
+            let chord = (p1 - p0).norm();
+            (p0, -fold_arrival(start, template, k) * chord, p1, fold_arrival(end, template, k) * chord)
+        })
+        .collect();
+    let middle_core: Vec<Point3<f64>> = template.core.iter().map(|c| template.place(station, c)).collect();
+    let guide_at: Vec<Point3<f64>> = guides.iter().map(|c| on_guide(c, 0.5)).collect();
+    let middle = TransitionPoints { core: middle_core, targets: vec![], centre: station.point };
+    let (probe, middle) = guided_section(middle, &guide_at, *station, start, setup);
+    if !probe.valid() {
+        return Err(transition_failure(setup, branch, start.geometry, 0.0, &probe));
+    }
+    let upstream =
+        transition_sections(start, station, -1.0, &up, &|k, u| on_guide(&guides[k], 0.5 - 0.5 * u), setup, branch)?;
+    let downstream =
+        transition_sections(end, station, 1.0, &down, &|k, u| on_guide(&guides[k], 0.5 + 0.5 * u), setup, branch)?;
+    let mut out = vec![up.fold];
+    out.extend(upstream.into_iter().rev());
+    out.push(middle);
+    out.extend(downstream);
+    out.push(down.fold);
     Ok(out)
 }

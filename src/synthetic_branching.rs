@@ -187,26 +187,11 @@ impl YBifurcation {
         check_range(&what, "parent radius (mm)", self.parent_radius, 1e-6, 1e6)?;
         for (i, (&r, &a)) in self.daughter_radii.iter().zip(&self.half_angles_deg).enumerate() {
             check_range(&what, &format!("radius of daughter {} (mm)", i + 1), r, 1e-6, 1e6)?;
-            check_range(
-                &what,
-                &format!("half-angle of daughter {} (degrees)", i + 1),
-                a,
-                5.0,
-                90.0,
-            )?;
+            check_range(&what, &format!("half-angle of daughter {} (degrees)", i + 1), a, 5.0, 90.0)?;
         }
-        let directions = [
-            daughter_direction(self.half_angles_deg[0], 1.0),
-            daughter_direction(self.half_angles_deg[1], -1.0),
-        ];
-        let mut tubes = vec![Tube {
-            name: "parent".into(),
-            anchor: Point3::origin(),
-            direction: Vector3::z(),
-            radius: self.parent_radius,
-            back: TubeEnd::Open { length: 0.0 },
-            front: TubeEnd::Junction { length: 0.0 },
-        }];
+        let directions =
+            [daughter_direction(self.half_angles_deg[0], 1.0), daughter_direction(self.half_angles_deg[1], -1.0)];
+        let mut tubes = vec![parent_tube(self.parent_radius, TubeEnd::Junction { length: 0.0 })];
         for (i, (d, r)) in directions.iter().zip(self.daughter_radii).enumerate() {
             tubes.push(Tube {
                 name: format!("daughter {}", i + 1),
@@ -256,33 +241,16 @@ impl Default for TJunction {
 impl TJunction {
     /// Parent radius 2 mm, branch `2 / ratio` at `angle_deg`.
     pub fn with(angle_deg: f64, ratio: f64) -> Self {
-        TJunction {
-            branch_radius: 2.0 / ratio,
-            branch_angle_deg: angle_deg,
-            ..TJunction::default()
-        }
+        TJunction { branch_radius: 2.0 / ratio, branch_angle_deg: angle_deg, ..TJunction::default() }
     }
 
     pub fn fixture(&self, name: &str) -> Result<BranchingFixture> {
         let what = format!("T junction '{name}'");
         check_range(&what, "parent radius (mm)", self.parent_radius, 1e-6, 1e6)?;
-        check_range(
-            &what,
-            "branch radius (mm)",
-            self.branch_radius,
-            1e-6,
-            self.parent_radius,
-        )?;
+        check_range(&what, "branch radius (mm)", self.branch_radius, 1e-6, self.parent_radius)?;
         check_range(&what, "branch angle (degrees)", self.branch_angle_deg, 10.0, 170.0)?;
         let tubes = vec![
-            Tube {
-                name: "parent".into(),
-                anchor: Point3::origin(),
-                direction: Vector3::z(),
-                radius: self.parent_radius,
-                back: TubeEnd::Open { length: 0.0 },
-                front: TubeEnd::Open { length: 0.0 },
-            },
+            parent_tube(self.parent_radius, TubeEnd::Open { length: 0.0 }),
             Tube {
                 name: "branch".into(),
                 anchor: Point3::origin(),
@@ -293,6 +261,78 @@ impl TJunction {
             },
         ];
         BranchingFixture::assemble(name, tubes, self.free_length_radii, self.blend_width, self.cell_size)
+    }
+}
+
+/// Parameters of a straight vessel with two side branches close together (as the arch's
+/// branches leave the aorta): the parent runs along +z, branch `i` leaves its axis at
+/// `z = (i - 1/2) spacing_radii R` (the first upstream of the origin, the second downstream), at
+/// `angles_deg[i]` from the parent's downstream axis and `azimuths_deg[i]` about it from +x.
+/// Lengths in mm.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SideBranches {
+    pub parent_radius: f64,
+    pub branch_radii: [f64; 2],
+    /// Angle between each branch and the parent's downstream axis, degrees, in [10, 170].
+    pub angles_deg: [f64; 2],
+    /// Azimuth of each branch about the parent's axis, degrees (0: towards +x).
+    pub azimuths_deg: [f64; 2],
+    /// Distance between the two branch anchors on the parent's axis, in parent radii.
+    pub spacing_radii: f64,
+    /// Free length of each tube end past its separation distance, in its own radii (at least 2).
+    pub free_length_radii: f64,
+}
+
+impl SideBranches {
+    /// Parent radius 2 mm, both branches `2 / ratio` at right angles, the second turned by
+    /// `azimuth_deg` about the parent from the first, their anchors `spacing_radii` parent
+    /// radii apart.
+    pub fn with(spacing_radii: f64, ratio: f64, azimuth_deg: f64) -> Self {
+        SideBranches {
+            parent_radius: 2.0,
+            branch_radii: [2.0 / ratio, 2.0 / ratio],
+            angles_deg: [90.0, 90.0],
+            azimuths_deg: [0.0, azimuth_deg],
+            spacing_radii,
+            free_length_radii: 6.0,
+        }
+    }
+
+    pub fn fixture(&self, name: &str) -> Result<BranchingFixture> {
+        let what = format!("side branches '{name}'");
+        check_range(&what, "parent radius (mm)", self.parent_radius, 1e-6, 1e6)?;
+        check_range(&what, "anchor spacing (parent radii)", self.spacing_radii, 0.0, 1e3)?;
+        let mut tubes = vec![parent_tube(self.parent_radius, TubeEnd::Open { length: 0.0 })];
+        for i in 0..2 {
+            let branch = format!("branch {}", i + 1);
+            check_range(&what, &format!("radius of {branch} (mm)"), self.branch_radii[i], 1e-6, self.parent_radius)?;
+            check_range(&what, &format!("angle of {branch} (degrees)"), self.angles_deg[i], 10.0, 170.0)?;
+            let (a, phi) = (self.angles_deg[i].to_radians(), self.azimuths_deg[i].to_radians());
+            // Exact zeros where the branch is grid-aligned (as `daughter_direction` does).
+            let snap = |v: f64| if v.abs() < 1e-12 { 0.0 } else { v };
+            tubes.push(Tube {
+                name: branch,
+                anchor: Point3::new(0.0, 0.0, (i as f64 - 0.5) * self.spacing_radii * self.parent_radius),
+                direction: Vector3::new(snap(a.sin() * phi.cos()), snap(a.sin() * phi.sin()), snap(a.cos())),
+                radius: self.branch_radii[i],
+                back: TubeEnd::Junction { length: 0.0 },
+                front: TubeEnd::Open { length: 0.0 },
+            });
+        }
+        BranchingFixture::assemble(name, tubes, self.free_length_radii, None, None)
+    }
+}
+
+/// The parent of a fixture: along +z from its inlet through the origin, finished at the front
+/// as given (open for a vessel running on, at the junction for a Y's parent).
+fn parent_tube(radius: f64, front: TubeEnd) -> Tube {
+    Tube {
+        name: "parent".into(),
+        anchor: Point3::origin(),
+        direction: Vector3::z(),
+        radius,
+        back: TubeEnd::Open { length: 0.0 },
+        front,
     }
 }
 
@@ -310,9 +350,7 @@ fn check_range(what: &str, name: &str, value: f64, lo: f64, hi: f64) -> Result<(
     if value.is_finite() && value >= lo && value <= hi {
         Ok(())
     } else {
-        Err(Error::Config(format!(
-            "{what}: {name} is {value}, it must lie in [{lo}, {hi}]"
-        )))
+        Err(Error::Config(format!("{what}: {name} is {value}, it must lie in [{lo}, {hi}]")))
     }
 }
 
@@ -405,12 +443,7 @@ impl Capsule {
     fn new(a: Point3<f64>, b: Point3<f64>, radius: f64) -> Self {
         let axis = b - a;
         let len2 = axis.norm_squared();
-        Capsule {
-            a,
-            axis,
-            inv_len2: if len2 > 0.0 { 1.0 / len2 } else { 0.0 },
-            radius,
-        }
+        Capsule { a, axis, inv_len2: if len2 > 0.0 { 1.0 / len2 } else { 0.0 }, radius }
     }
 
     /// `|p - segment| - r` and its gradient (zero on the axis itself, never near the surface).
@@ -588,10 +621,7 @@ impl BranchingFixture {
             .iter()
             .map(|t| {
                 let reach = |e: &TubeEnd| if e.is_open() { UNBOUNDED } else { e.length() };
-                (
-                    t.anchor - t.direction * reach(&t.back),
-                    t.anchor + t.direction * reach(&t.front),
-                )
+                (t.anchor - t.direction * reach(&t.back), t.anchor + t.direction * reach(&t.front))
             })
             .collect();
         let mut separations = Vec::new();
@@ -601,11 +631,7 @@ impl BranchingFixture {
                 if !end.is_open() {
                     continue;
                 }
-                let dir = if forward {
-                    tubes[i].direction
-                } else {
-                    -tubes[i].direction
-                };
+                let dir = if forward { tubes[i].direction } else { -tubes[i].direction };
                 let mut separation: f64 = 0.0;
                 for (j, (a, b)) in unbounded.iter().enumerate() {
                     if j != i {
@@ -646,10 +672,7 @@ impl BranchingFixture {
     fn check_structure(&self) -> Result<()> {
         let parent = &self.tubes[0];
         if !parent.back.is_open() {
-            return Err(Error::Config(format!(
-                "{}: the parent's upstream end must be open (the inlet)",
-                self.name
-            )));
+            return Err(Error::Config(format!("{}: the parent's upstream end must be open (the inlet)", self.name)));
         }
         for t in &self.tubes[1..] {
             let on_axis = closest_on_segment(&t.anchor, &parent.back_point(), &parent.front_point());
@@ -747,11 +770,7 @@ impl BranchingFixture {
             let len = (to - from).norm();
             let n = ((len / self.centerline_spacing).ceil() as usize).max(1);
             for i in 1..=n {
-                out.push(if i == n {
-                    to
-                } else {
-                    from + (to - from) * (i as f64 / n as f64)
-                });
+                out.push(if i == n { to } else { from + (to - from) * (i as f64 / n as f64) });
             }
         };
         self.openings()
@@ -882,12 +901,7 @@ fn sample_grid(fixture: &BranchingFixture, f: &LumenFunction) -> Grid {
     // tangentially and the blend leaves a lens thinner than a cell) fall half-way between nodes.
     let origin = lo.map(|x| ((x / h).floor() - 0.5) * h);
     let cells = [0, 1, 2].map(|k| ((hi[k] - origin[k]) / h).ceil() as usize);
-    let mut grid = Grid {
-        origin,
-        h,
-        cells,
-        values: Vec::new(),
-    };
+    let mut grid = Grid { origin, h, cells, values: Vec::new() };
     let n = grid.node_count();
     let total = n[0] * n[1] * n[2];
     grid.values = (0..total)
@@ -982,11 +996,7 @@ fn surface_nets(grid: &Grid) -> (Vec<Point3<f64>>, Vec<[u32; 4]>) {
                     };
                     // Counter-clockwise about +d: (-,-), (+,-), (+,+), (-,+) in (u, w).
                     let quad = [cell(1, 1), cell(0, 1), cell(0, 0), cell(1, 0)];
-                    quads.push(if here {
-                        quad
-                    } else {
-                        [quad[3], quad[2], quad[1], quad[0]]
-                    });
+                    quads.push(if here { quad } else { [quad[3], quad[2], quad[1], quad[0]] });
                 }
             }
         }
@@ -1020,11 +1030,7 @@ fn relax_on_surface(f: &LumenFunction, vertices: &[Point3<f64>], quads: &[[u32; 
             if around.is_empty() {
                 return p;
             }
-            let mean = around
-                .iter()
-                .map(|&u| vertices[u as usize].coords)
-                .sum::<Vector3<f64>>()
-                / around.len() as f64;
+            let mean = around.iter().map(|&u| vertices[u as usize].coords).sum::<Vector3<f64>>() / around.len() as f64;
             let normal = f.value_gradient(&p).1.normalize();
             let d = mean - p.coords;
             f.project(&(p + (d - normal * d.dot(&normal)) * 0.5)).unwrap_or(p)
@@ -1088,20 +1094,13 @@ impl BranchingFixture {
                 "a smaller cell size or a wider blend",
             ));
         }
-        let mut stats = SurfaceStats {
-            grid: grid.cells,
-            ..SurfaceStats::default()
-        };
+        let mut stats = SurfaceStats { grid: grid.cells, ..SurfaceStats::default() };
         for o in self.openings() {
             triangles = clip_open_end(&f, &o, h, &mut vertices, triangles, &mut stats)
                 .map_err(|(p, what)| self.geometry_error(&p, &what, "a smaller cell size"))?;
         }
         let (vertices, triangles) = compact(vertices, triangles);
-        let mut surface = BranchingSurface {
-            vertices,
-            triangles,
-            stats,
-        };
+        let mut surface = BranchingSurface { vertices, triangles, stats };
         self.check_surface(&f, &mut surface)?;
         Ok(surface)
     }
@@ -1362,10 +1361,9 @@ fn clip_open_end(
                         let (pa, pb) = (vertices[key.0 as usize], vertices[key.1 as usize]);
                         let (sa, sb) = (s[key.0 as usize], s[key.1 as usize]);
                         let crossing = pa + (pb - pa) * (sa / (sa - sb));
-                        let q = f.project_in_plane(&crossing, &o.centre, &n).ok_or((
-                            crossing,
-                            "a cut point could not be moved onto the end circle".to_string(),
-                        ))?;
+                        let q = f
+                            .project_in_plane(&crossing, &o.centre, &n)
+                            .ok_or((crossing, "a cut point could not be moved onto the end circle".to_string()))?;
                         vertices.push(q);
                         let id = (vertices.len() - 1) as u32;
                         cut_points.insert(key, id);
@@ -1399,10 +1397,7 @@ fn compact(vertices: Vec<Point3<f64>>, triangles: Vec<[u32; 3]>) -> (Vec<Point3<
             kept.push(p);
         }
     }
-    let triangles = triangles
-        .into_iter()
-        .map(|t| t.map(|v| new_index[v as usize]))
-        .collect();
+    let triangles = triangles.into_iter().map(|t| t.map(|v| new_index[v as usize])).collect();
     (kept, triangles)
 }
 
@@ -1434,36 +1429,21 @@ impl BranchingFixture {
                 .zip(radii)
                 .map(|(p, r)| {
                     r.ok_or_else(|| {
-                        self.geometry_error(
-                            p,
-                            "no closest surface point for a centerline point",
-                            "a smaller cell size",
-                        )
+                        self.geometry_error(p, "no closest surface point for a centerline point", "a smaller cell size")
                     })
                 })
                 .collect::<Result<Vec<f64>>>()?;
             let mut cell_tags = IndexMap::new();
             cell_tags.insert("CenterlineIds".to_string(), id as i64);
-            polylines.push(CenterlinePolyline {
-                points,
-                radii: Some(radii),
-                normals: None,
-                cell_tags,
-            });
+            polylines.push(CenterlinePolyline { points, radii: Some(radii), normals: None, cell_tags });
         }
-        Ok(Centerlines {
-            polylines,
-            source: PathBuf::from(format!("{} (synthetic)", self.name)),
-        })
+        Ok(Centerlines { polylines, source: PathBuf::from(format!("{} (synthetic)", self.name)) })
     }
 }
 
 /// Paths of the two files of a branching fixture in `dir`: `<name>.stl`, `<name>_centerlines.vtp`.
 pub fn branching_fixture_paths(name: &str, dir: &Path) -> (PathBuf, PathBuf) {
-    (
-        dir.join(format!("{name}.stl")),
-        dir.join(format!("{name}_centerlines.vtp")),
-    )
+    (dir.join(format!("{name}.stl")), dir.join(format!("{name}_centerlines.vtp")))
 }
 
 /// What [`write_branching_fixture`] wrote.
@@ -1489,21 +1469,13 @@ pub fn write_branching_fixture(fixture: &BranchingFixture, dir: &Path) -> Result
     );
     write_binary_stl(&stl, &header, &surface.vertices, &surface.triangles)?;
     write_vtp(&centerline_data, 1.0, &centerlines)?;
-    Ok(WrittenFixture {
-        stl,
-        centerlines,
-        surface,
-        centerline_data,
-    })
+    Ok(WrittenFixture { stl, centerlines, surface, centerline_data })
 }
 
 /// The committed branching fixtures: `y_bifurcation` ([`YBifurcation::default`]) and
 /// `t_junction` ([`TJunction::default`]).
 pub fn default_branching_fixtures() -> Result<Vec<BranchingFixture>> {
-    Ok(vec![
-        YBifurcation::default().fixture("y_bifurcation")?,
-        TJunction::default().fixture("t_junction")?,
-    ])
+    Ok(vec![YBifurcation::default().fixture("y_bifurcation")?, TJunction::default().fixture("t_junction")?])
 }
 
 /// Writes every fixture of [`default_branching_fixtures`] into `dir`; returns the files written
@@ -1538,10 +1510,7 @@ mod tests {
             let (_, g) = smooth_min((1.0, ga), (b, gb), k);
             let da = (smooth_min((1.0 + h, ga), (b, gb), k).0 - smooth_min((1.0 - h, ga), (b, gb), k).0) / (2.0 * h);
             let db = (smooth_min((1.0, ga), (b + h, gb), k).0 - smooth_min((1.0, ga), (b - h, gb), k).0) / (2.0 * h);
-            assert!(
-                (g.x - da).abs() < 1e-8 && (g.y - db).abs() < 1e-8,
-                "b = {b}: {g:?} vs {da}, {db}"
-            );
+            assert!((g.x - da).abs() < 1e-8 && (g.y - db).abs() < 1e-8, "b = {b}: {g:?} vs {da}, {db}");
         }
     }
 
@@ -1605,13 +1574,8 @@ mod tests {
         let fixture = YBifurcation::default().fixture("y").unwrap();
         let f = fixture.lumen_function();
         let q = f.project(&Point3::new(2.3, 0.4, -9.0)).unwrap();
-        assert!(
-            f.value(&q).abs() < 1e-14 && (q.x.hypot(q.y) - 2.0).abs() < 1e-14,
-            "{q:?}"
-        );
-        let c = f
-            .closest_point(&Point3::new(0.5, 0.0, -9.0), &Point3::new(0.0, 2.0, -8.8))
-            .unwrap();
+        assert!(f.value(&q).abs() < 1e-14 && (q.x.hypot(q.y) - 2.0).abs() < 1e-14, "{q:?}");
+        let c = f.closest_point(&Point3::new(0.5, 0.0, -9.0), &Point3::new(0.0, 2.0, -8.8)).unwrap();
         assert!((c - Point3::new(2.0, 0.0, -9.0)).norm() < 1e-9, "{c:?}");
     }
 }

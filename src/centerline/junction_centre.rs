@@ -23,7 +23,7 @@ const BLEND_MOVES: f64 = 3.0;
 /// Moves every junction whose file centre sits off the middle of the lumen (see the module).
 pub(crate) fn centre_junctions(tree: &mut RootedTree, surface: &LumenSurface) {
     for node in 0..tree.nodes.len() {
-        if tree.children[node].is_empty() || tree.parent[node].is_none() {
+        if tree.children[node].is_empty() || tree.parent[node].is_none() || tree.parted[node] {
             continue;
         }
         let start = tree.nodes[node].point;

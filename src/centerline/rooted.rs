@@ -1,8 +1,9 @@
 //! The skeleton hung from its inlet: edges oriented with the flow, nodes that only join two
 //! edges removed, junctions closer than the merge distance merged, branches put in order.
 
-use super::skeleton::{Edge, Node, Skeleton};
+use super::skeleton::{Edge, Line, Node, Skeleton, APART};
 use crate::error::{Error, Result};
+use nalgebra::Point3;
 use std::path::Path;
 
 /// Junction-to-junction segments shorter than this many radii are always merged away, whatever
@@ -21,13 +22,16 @@ pub(crate) struct RootedTree {
     pub parent: Vec<Option<usize>>,
     /// Live edges, parents before daughters, a junction's daughters next to each other.
     pub order: Vec<usize>,
+    /// Nodes placed where two daughters sharing a trunk part ([`split_shared_trunks`]): on the
+    /// medial axis by construction, so they are not moved to a larger ball.
+    pub parted: Vec<bool>,
 }
 
 /// Orients the skeleton from node `inlet`, joins pass-through nodes, merges junctions whose
 /// centres are closer than `merge_radii` times the upstream junction's radius, and orders the
 /// branches.
 pub(crate) fn hang(skeleton: Skeleton, inlet: usize, merge_radii: f64, source: &Path) -> Result<RootedTree> {
-    let Skeleton { nodes, mut edges, .. } = skeleton;
+    let Skeleton { mut nodes, mut edges, .. } = skeleton;
     let mut incident: Vec<Vec<usize>> = vec![vec![]; nodes.len()];
     for (i, e) in edges.iter().enumerate() {
         incident[e.ends[0]].push(i);
@@ -73,12 +77,8 @@ pub(crate) fn hang(skeleton: Skeleton, inlet: usize, merge_radii: f64, source: &
     }
     if let Some(lost) = (0..edges.len()).find(|&e| !used[e]) {
         let line = &edges[lost].line;
-        let gap = |p| {
-            (0..edges.len())
-                .filter(|&e| used[e])
-                .map(|e| edges[e].line.closest(p).0)
-                .fold(f64::INFINITY, f64::min)
-        };
+        let gap =
+            |p| (0..edges.len()).filter(|&e| used[e]).map(|e| edges[e].line.closest(p).0).fold(f64::INFINITY, f64::min);
         let (a, b) = (line.points[0], line.points[line.points.len() - 1]);
         return Err(Error::input(
             source,
@@ -98,6 +98,11 @@ pub(crate) fn hang(skeleton: Skeleton, inlet: usize, merge_radii: f64, source: &
             ),
         ));
     }
+
+    let first_parted = nodes.len();
+    split_shared_trunks(&mut nodes, &mut edges, &mut children, &mut parent, inlet);
+    let parted = (0..nodes.len()).map(|v| v >= first_parted).collect();
+    let bfs = descendants(&children, &edges, inlet);
 
     // A node between exactly two edges is no junction: join the edges.
     for &v in &bfs {
@@ -159,11 +164,195 @@ pub(crate) fn hang(skeleton: Skeleton, inlet: usize, merge_radii: f64, source: &
         next += 1;
         order.extend(children[edges[e].ends[1]].iter().copied());
     }
-    Ok(RootedTree {
-        nodes,
-        edges,
-        children,
-        parent,
-        order,
-    })
+    Ok(RootedTree { nodes, edges, children, parent, order, parted })
+}
+
+/// Two daughters of a node that run together (within [`APART`] radii of each other) for at
+/// least this many radii from it share a trunk.
+const SHARED_TRUNK: f64 = 1.0;
+
+/// Nodes in breadth-first order from `inlet` along the children lists.
+fn descendants(children: &[Vec<usize>], edges: &[Edge], inlet: usize) -> Vec<usize> {
+    let mut order = vec![inlet];
+    let mut next = 0;
+    while next < order.len() {
+        let u = order[next];
+        next += 1;
+        order.extend(children[u].iter().map(|&e| edges[e].ends[1]));
+    }
+    order
+}
+
+/// Where two lines from a common first point part: the first index of `a` farther than
+/// [`APART`] radii from `b`, when `a` has run along `b` for at least [`SHARED_TRUNK`] radii
+/// before it and goes on after it.
+fn parting(a: &Line, b: &Line) -> Option<usize> {
+    let arcs = a.arcs();
+    let k = (1..a.points.len()).find(|&k| b.closest(&a.points[k]).0 > APART * a.radii[k])?;
+    (k >= 2 && k + 1 < a.points.len() && arcs[k] >= SHARED_TRUNK * a.radii[k]).then_some(k)
+}
+
+/// Daughters that leave a node side by side and part only later (paths drawn separately to two
+/// outlets through one common vessel, as gmsh's centerlines of the arch run to the
+/// brachiocephalic and left carotid arteries through their common origin) become a trunk, the
+/// mean of the two up to where they part, and a junction there. Without this the two would
+/// leave the upstream junction in the same direction, which no book of pages can order.
+fn split_shared_trunks(
+    nodes: &mut Vec<Node>,
+    edges: &mut Vec<Edge>,
+    children: &mut Vec<Vec<usize>>,
+    parent: &mut Vec<Option<usize>>,
+    inlet: usize,
+) {
+    let mut work = vec![inlet];
+    while let Some(u) = work.pop() {
+        'again: loop {
+            for i in 0..children[u].len() {
+                for j in 0..children[u].len() {
+                    let (ea, eb) = (children[u][i], children[u][j]);
+                    if i == j {
+                        continue;
+                    }
+                    let Some(k) = parting(&edges[ea].line, &edges[eb].line) else { continue };
+                    let Some((trunk, tail_a, tail_b)) = part_lines(&edges[ea].line, &edges[eb].line, k) else {
+                        continue;
+                    };
+                    let w = nodes.len();
+                    let last = trunk.points.len() - 1;
+                    nodes.push(Node { point: trunk.points[last], radius: trunk.radii[last], key: i64::MAX });
+                    let t = edges.len();
+                    edges.push(Edge { ends: [u, w], line: trunk, source: edges[ea].source });
+                    edges[ea].line = tail_a;
+                    edges[ea].ends[0] = w;
+                    edges[eb].line = tail_b;
+                    edges[eb].ends[0] = w;
+                    children[u].retain(|&e| e != ea && e != eb);
+                    children[u].push(t);
+                    children.push(vec![ea, eb]);
+                    parent.push(Some(t));
+                    continue 'again;
+                }
+            }
+            break;
+        }
+        work.extend(children[u].iter().map(|&e| edges[e].ends[1]));
+    }
+}
+
+/// The trunk (mean of `a` and `b` up to point `k - 1` of `a`, the last one before they part)
+/// and the two tails from its end; None when either line does not go on past that point.
+fn part_lines(a: &Line, b: &Line, k: usize) -> Option<(Line, Line, Line)> {
+    let on_b = |p: &Point3<f64>| {
+        let (_, seg, t) = b.closest(p);
+        let q = b.points[seg] + (b.points[seg + 1] - b.points[seg]) * t;
+        let r = b.radii[seg] * (1.0 - t) + b.radii[seg + 1] * t;
+        (q, r, seg)
+    };
+    let normal_of = |l: &Line, i: usize| l.normals.as_ref().map(|n| n[i]);
+    let mut trunk = Line { points: vec![], radii: vec![], normals: a.normals.as_ref().map(|_| vec![]) };
+    for i in 0..k {
+        let (q, r) = if i == 0 {
+            (a.points[0], a.radii[0])
+        } else {
+            let (q, r, _) = on_b(&a.points[i]);
+            (q, r)
+        };
+        let p = Point3::from((a.points[i].coords + q.coords) * 0.5);
+        if trunk.points.last().is_some_and(|l: &Point3<f64>| (l - p).norm() < 1e-9) {
+            continue;
+        }
+        trunk.points.push(p);
+        trunk.radii.push(0.5 * (a.radii[i] + r));
+        if let (Some(n), Some(m)) = (&mut trunk.normals, normal_of(a, i)) {
+            n.push(m);
+        }
+    }
+    let end = trunk.points[trunk.points.len() - 1];
+    let end_r = trunk.radii[trunk.radii.len() - 1];
+    // A tail: the trunk's end, then the line from point `from` on (the points at the trunk's
+    // end itself dropped: a line has no repeated points); None when nothing is left.
+    let tail = |l: &Line, from: usize, seam: usize| -> Option<Line> {
+        let mut out =
+            Line { points: vec![end], radii: vec![end_r], normals: l.normals.as_ref().map(|n| vec![n[seam]]) };
+        for i in (from..l.points.len()).filter(|&i| (l.points[i] - end).norm() > 1e-9) {
+            out.points.push(l.points[i]);
+            out.radii.push(l.radii[i]);
+            if let (Some(n), Some(m)) = (&mut out.normals, normal_of(l, i)) {
+                n.push(m);
+            }
+        }
+        (out.points.len() >= 2).then_some(out)
+    };
+    let (_, _, seg) = on_b(&a.points[k - 1]);
+    Some((trunk, tail(a, k, k - 1)?, tail(b, seg + 1, seg)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(points: Vec<Point3<f64>>) -> Line {
+        let n = points.len();
+        Line { points, radii: vec![1.0; n], normals: None }
+    }
+
+    /// From the junction at (0, 0, 10) two paths run up the z axis 8 mm side by side (apart by
+    /// 2 % of the way, well inside a quarter radius), then leave towards +x and -x.
+    #[test]
+    fn paths_running_together_become_a_trunk_and_a_junction_where_they_part() {
+        let path = |side: f64| {
+            let mut p: Vec<Point3<f64>> =
+                (0..=32).map(|i| i as f64 * 0.25).map(|t| Point3::new(side * 0.01 * t, 0.0, 10.0 + t)).collect();
+            p.extend((1..=20).map(|i| i as f64 * 0.25).map(|s| Point3::new(side * (0.08 + s), 0.0, 18.0 + s)));
+            line(p)
+        };
+        let (a, b) = (path(1.0), path(-1.0));
+        let node = |p: Point3<f64>| Node { point: p, radius: 1.0, key: 0 };
+        let mut nodes = vec![
+            node(Point3::origin()),
+            node(Point3::new(0.0, 0.0, 10.0)),
+            node(*a.points.last().unwrap()),
+            node(*b.points.last().unwrap()),
+        ];
+        let inlet = line((0..=10).map(|i| Point3::new(0.0, 0.0, i as f64)).collect());
+        let mut edges = vec![
+            Edge { ends: [0, 1], line: inlet, source: 0 },
+            Edge { ends: [1, 2], line: a, source: 1 },
+            Edge { ends: [1, 3], line: b, source: 2 },
+        ];
+        let mut children = vec![vec![0], vec![1, 2], vec![], vec![]];
+        let mut parent = vec![None, Some(0), Some(1), Some(2)];
+        split_shared_trunks(&mut nodes, &mut edges, &mut children, &mut parent, 0);
+
+        assert_eq!(nodes.len(), 5, "one new node");
+        let w = 4;
+        assert_eq!(children[1].len(), 1, "the junction keeps one daughter, the trunk");
+        let trunk = &edges[children[1][0]];
+        assert_eq!(trunk.ends, [1, w]);
+        assert_eq!(children[w], vec![1, 2], "both paths leave the new junction");
+        assert!((nodes[w].point - Point3::new(0.0, 0.0, 18.0)).norm() < 0.3, "{:?}", nodes[w].point);
+        assert!(nodes[w].point.x.abs() < 1e-3, "the trunk is the mean of the two paths: {:?}", nodes[w].point);
+        for e in [1, 2] {
+            assert_eq!(edges[e].line.points[0], nodes[w].point, "edge {e} starts at the new junction");
+            assert!(edges[e].line.points.windows(2).all(|s| (s[1] - s[0]).norm() > 1e-9));
+        }
+        assert_eq!(trunk.line.points[0], nodes[1].point);
+        assert_eq!(*trunk.line.points.last().unwrap(), nodes[w].point);
+        assert_eq!(parent[w], Some(children[1][0]));
+
+        // Paths that part at once stay as they are.
+        let mut nodes2 = nodes[..4].to_vec();
+        let quick =
+            |side: f64| line((0..=20).map(|i| i as f64 * 0.25).map(|s| Point3::new(side * s, 0.0, 10.0 + s)).collect());
+        let mut edges2 = vec![
+            edges[0].clone(),
+            Edge { ends: [1, 2], line: quick(1.0), source: 1 },
+            Edge { ends: [1, 3], line: quick(-1.0), source: 2 },
+        ];
+        let mut children2 = vec![vec![0], vec![1, 2], vec![], vec![]];
+        let mut parent2 = vec![None, Some(0), Some(1), Some(2)];
+        split_shared_trunks(&mut nodes2, &mut edges2, &mut children2, &mut parent2, 0);
+        assert_eq!(nodes2.len(), 4);
+        assert_eq!(children2[1], vec![1, 2]);
+    }
 }
