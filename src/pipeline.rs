@@ -66,7 +66,8 @@ fn plan_branches(
             let mut start = at_junction(branch.start_junction, true)?;
             let mut end = at_junction(branch.end_junction, false)?;
             // A bridge (no clear section near one of its junctions, or too little room left
-            // between the two for ordinary sections): both transitions meet in the middle.
+            // between the two for ordinary sections): each junction takes half the branch and
+            // projection sweeps it from fold to fold.
             if let (Some(a), Some(b)) = (&mut start, &mut end) {
                 let room = match (a.2, b.2) {
                     (Some(x), Some(y)) => len - x - y,

@@ -13,7 +13,7 @@ use crate::centerline::{Branch, CenterlineSample};
 use crate::error::{Error, Result};
 use crate::junction::{transition_points, FoldEnd, JunctionGeometry, TransitionPoints};
 use crate::surface::LumenSurface;
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Point3, Vector2, Vector3};
 use rayon::prelude::*;
 
 /// Hit triangles whose normal is within this cosine of the axis mark a cap (about 70 degrees
@@ -338,7 +338,8 @@ pub fn project_branch(
     })
 }
 
-/// Whether the transitions of a branch between two junctions meet in its middle (see [`bridge`]).
+/// Whether a branch between two junctions is a bridge (see [`bridge`]): the plan gives each
+/// junction half of it.
 fn is_bridge(lo: f64, hi: f64, length: f64) -> bool {
     hi - lo <= 1e-9 * length
 }
@@ -368,7 +369,7 @@ const CLEAR_SEARCH: f64 = 6.0;
 /// geometric estimate of [`crate::junction::transition_length`], moved away from the junction
 /// until the section and the next radius of the branch are clear of the other branches. None
 /// when the branch runs to another junction and no section of this junction's half of it is
-/// clear: the two transitions then meet in the middle (see [`bridge`]).
+/// clear: the branch is then a bridge (see [`bridge`]).
 pub fn clear_transition_length(
     geometry: &JunctionGeometry,
     slot: usize,
@@ -611,11 +612,9 @@ fn cast_fold(
     Ok(FoldCast { params, points, fold: ProjectedSection { in_junction: true, ..fold } })
 }
 
-/// Direction in which a transition arrives at the fold at its ring node `k`.
-fn fold_arrival(j: &JunctionEnd, template: &SectionTemplate, k: usize) -> Vector3<f64> {
-    let xy = template.core[template.ring_core_index[k]];
-    let turned = crate::junction::turn(j.fold.quarter_turns, &xy);
-    j.geometry.arrival(j.fold.slot, &turned, template.core_size)
+/// Direction in which a transition arrives at the fold at the template point `xy`.
+fn fold_arrival(j: &JunctionEnd, template: &SectionTemplate, xy: &Vector2<f64>) -> Vector3<f64> {
+    j.geometry.arrival(j.fold.slot, &crate::junction::turn(j.fold.quarter_turns, xy), template.core_size)
 }
 
 /// A guide curve (Hermite end points and tangents) for each ring node.
@@ -716,7 +715,8 @@ fn transition(
         .map(|k| {
             let (p0, p1) = (ordinary.surface[k], cast.fold.surface[k]);
             let chord = (p1 - p0).norm();
-            (p0, towards * chord, p1, fold_arrival(j, setup.template, k) * chord)
+            let xy = setup.template.core[setup.template.ring_core_index[k]];
+            (p0, towards * chord, p1, fold_arrival(j, setup.template, &xy) * chord)
         })
         .collect();
     let mut out = transition_sections(j, station, sense, &cast, &|k, u| on_guide(&guides[k], u), setup, branch)?;
@@ -724,12 +724,15 @@ fn transition(
     Ok(out)
 }
 
-/// A branch between two junctions too close for a transition and ordinary sections each (the
-/// aortic arch between its branches): one section in the middle, `station`, and the two
-/// transitions from it, with no ordinary section. That middle section stands inside the
-/// junctions' common lumen (its plain rays would escape into a branch), so every ray of the
-/// bridge, the middle's included, is guided by one Hermite curve from its node on the upstream
-/// fold to its node on the downstream fold. Sections from the upstream fold to the downstream one.
+/// A branch between two junctions too close for a transition and ordinary sections each (two
+/// side branches a couple of radii apart, the aortic arch between its branches): a *bridge*,
+/// swept straight from the upstream fold to the downstream one, with no ordinary section. Each
+/// core node follows a Hermite curve from its place on one fold to its place on the other
+/// (leaving and arriving across the pages), and each ray is aimed at a guide point on the same
+/// kind of curve between its wall nodes on the two folds: the whole bridge lies in the
+/// junctions' common lumen, where a plain ray would escape into a branch. `station` (the
+/// branch's middle) gives the sections their frame. Sections from the upstream fold to the
+/// downstream one.
 fn bridge(
     start: &JunctionEnd,
     end: &JunctionEnd,
@@ -740,28 +743,41 @@ fn bridge(
     let template = setup.template;
     let up = cast_fold(start, station, -1.0, setup, branch)?;
     let down = cast_fold(end, station, 1.0, setup, branch)?;
+    // From a point of the upstream fold to its place on the downstream one: leaving the first
+    // as the transition arrives there, reversed, and arriving at the second.
+    let curve = |p0: Point3<f64>, p1: Point3<f64>, xy: &Vector2<f64>| -> GuideCurve {
+        let chord = (p1 - p0).norm();
+        (p0, -fold_arrival(start, template, xy) * chord, p1, fold_arrival(end, template, xy) * chord)
+    };
+    let cores: Vec<GuideCurve> =
+        template.core.iter().enumerate().map(|(c, xy)| curve(up.fold.core[c], down.fold.core[c], xy)).collect();
     let guides: Vec<GuideCurve> = (0..template.ring_len())
-        .map(|k| {
-            let (p0, p1) = (up.fold.surface[k], down.fold.surface[k]);
-            let chord = (p1 - p0).norm();
-            (p0, -fold_arrival(start, template, k) * chord, p1, fold_arrival(end, template, k) * chord)
-        })
+        .map(|k| curve(up.fold.surface[k], down.fold.surface[k], &template.core[template.ring_core_index[k]]))
         .collect();
-    let middle_core: Vec<Point3<f64>> = template.core.iter().map(|c| template.place(station, c)).collect();
-    let guide_at: Vec<Point3<f64>> = guides.iter().map(|c| on_guide(c, 0.5)).collect();
-    let middle = TransitionPoints { core: middle_core, targets: vec![], centre: station.point };
-    let (probe, middle) = guided_section(middle, &guide_at, *station, start, setup);
-    if !probe.valid() {
-        return Err(transition_failure(setup, branch, start.geometry, 0.0, &probe));
-    }
-    let upstream =
-        transition_sections(start, station, -1.0, &up, &|k, u| on_guide(&guides[k], 0.5 - 0.5 * u), setup, branch)?;
-    let downstream =
-        transition_sections(end, station, 1.0, &down, &|k, u| on_guide(&guides[k], 0.5 + 0.5 * u), setup, branch)?;
+    let centre = curve(start.geometry.centre, end.geometry.centre, &Vector2::zeros());
+    let length = branch.length();
+    let cells = ((length / (setup.spacing)(station)).round() as usize).max(2);
     let mut out = vec![up.fold];
-    out.extend(upstream.into_iter().rev());
-    out.push(middle);
-    out.extend(downstream);
+    for i in 1..cells {
+        let v = i as f64 / cells as f64;
+        let p = TransitionPoints {
+            core: cores.iter().map(|c| on_guide(c, v)).collect(),
+            targets: vec![],
+            centre: on_guide(&centre, v),
+        };
+        let guide_at: Vec<Point3<f64>> = guides.iter().map(|c| on_guide(c, v)).collect();
+        let sample = CenterlineSample {
+            s: v * length,
+            point: p.centre,
+            radius: start.geometry.radius + (end.geometry.radius - start.geometry.radius) * v,
+            frame: station.frame,
+        };
+        let (probe, section) = guided_section(p, &guide_at, sample, start, setup);
+        if !probe.valid() {
+            return Err(transition_failure(setup, branch, start.geometry, v, &probe));
+        }
+        out.push(section);
+    }
     out.push(down.fold);
     Ok(out)
 }
