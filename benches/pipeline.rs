@@ -64,7 +64,8 @@ fn centerlines_case() {
     use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions};
     let v = vesselhex::synthetic::fixture_by_name("helical").expect("fixture");
     let (vertices, triangles) = vesselhex::synthetic::triangulate(v.as_ref(), 144, 0.16);
-    let surface = vesselhex::input::TriangleSurface { vertices, triangles, triangle_tags: None, source: "fine helix".into() };
+    let surface =
+        vesselhex::input::TriangleSurface { vertices, triangles, triangle_tags: None, source: "fine helix".into() };
     let t = Instant::now();
     let ex = extract_centerlines(&surface, &ExtractOptions::default()).expect("centerlines");
     println!(

@@ -443,10 +443,10 @@ fn all_decks_carry_the_same_material_constants() {
             assert!((x.gamma_deg - beta).abs() < 1e-9, "{deck} {layer}: fibre angle {} vs {beta}", x.gamma_deg);
         }
     }
-    // the documented default: HGO 2000 with c and k1 x 10, the intima as the media
+    // the documented default: HGO 2000 with c and k1 x 100, the intima as the media
     let d = WallMaterial::default();
-    assert_eq!((d.media.c_kpa, d.media.k1_kpa, d.media.k2), (30.0, 23.632, 0.8393));
-    assert_eq!((d.adventitia.c_kpa, d.adventitia.k1_kpa, d.adventitia.k2), (3.0, 5.62, 0.7112));
+    assert_eq!((d.media.c_kpa, d.media.k1_kpa, d.media.k2), (300.0, 236.32, 0.8393));
+    assert_eq!((d.adventitia.c_kpa, d.adventitia.k1_kpa, d.adventitia.k2), (30.0, 56.2, 0.7112));
     assert_eq!(d.intima, d.media);
     // dispersion: Abaqus and FEBio write it, CalculiX refuses it with the key
     options.material.media.kappa = 0.1;

@@ -921,8 +921,8 @@ fn metres_give_kilograms_and_pascals() {
         d.root.one("Loads").unwrap().one("surface_load").unwrap().one("pressure").unwrap().text.parse().unwrap();
     assert!((p - 13332.2387415).abs() < 1e-6);
     let media = d.root.one("Material").unwrap().all("material").find(|m| m.attr("name") == Some("media")).unwrap();
-    // the shared default: HGO 2000 media with c x10 = 30 kPa
-    assert!((media.one("c").unwrap().text.parse::<f64>().unwrap() - 30e3).abs() < 1e-9);
+    // the shared default: HGO 2000 media with c x100 = 300 kPa
+    assert!((media.one("c").unwrap().text.parse::<f64>().unwrap() - 300e3).abs() < 1e-9);
     assert_eq!(media.one("gamma").unwrap().text, "29");
     let fsi = fsi_deck(mesh, &options(LengthUnit::M)).unwrap();
     let f = check_all(&fsi, "fluid-FSI").unwrap();

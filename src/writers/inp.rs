@@ -70,9 +70,9 @@ pub const MMHG_IN_MPA: f64 = 133.322e-6;
 
 /// Share of the lumen pressure reached by the CalculiX deck's first, finely incremented step
 /// (`TOE_PRESSURE` of `step_inflation.inp`): the toe of the fibre wall's response, where it is
-/// softest. On the bundled Y bifurcation (coarse preset, default material) the largest
-/// displacement per 1 % of the pressure falls from 0.12 mm at the start to 0.03 mm at a tenth of
-/// it; increments of 2.25 % at 3.5 % of the pressure crush a 0.036 mm intima element of the flow
+/// softest. On the bundled Y bifurcation (coarse preset, the softer default material of earlier
+/// versions: HGO 2000 with c and k1 x10) the largest displacement per 1 % of the pressure falls
+/// from 0.12 mm at the start to 0.03 mm at a tenth of it; increments of 2.25 % at 3.5 % of the pressure crush a 0.036 mm intima element of the flow
 /// divider in a Newton iterate, and ccx's fibre law then stops the job.
 pub const TOE_SHARE: f64 = 0.1;
 
