@@ -46,7 +46,10 @@ pub struct SurfaceAccuracy {
 
 /// Distances of the interface nodes to the input surface, mm, in node-set order.
 pub fn node_distances(mesh: &VesselMesh, surface: &LumenSurface) -> Vec<f64> {
-    mesh.node_sets[sets::INTERFACE_NODES].par_iter().map(|&n| surface.closest(&mesh.nodes[n as usize]).distance).collect()
+    mesh.node_sets[sets::INTERFACE_NODES]
+        .par_iter()
+        .map(|&n| surface.closest(&mesh.nodes[n as usize]).distance)
+        .collect()
 }
 
 pub fn surface_accuracy(

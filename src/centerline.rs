@@ -36,11 +36,7 @@ impl Frame {
             n = any_perpendicular(&t);
         }
         let n = n.normalize();
-        Frame {
-            tangent: t,
-            normal: n,
-            binormal: t.cross(&n),
-        }
+        Frame { tangent: t, normal: n, binormal: t.cross(&n) }
     }
 }
 
@@ -109,11 +105,7 @@ impl Branch {
         let n = self.samples.len();
         let i = self.samples.partition_point(|q| q.s <= s).clamp(1, n - 1) - 1;
         let (a, b) = (&self.samples[i], &self.samples[i + 1]);
-        let w = if b.s > a.s {
-            ((s - a.s) / (b.s - a.s)).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
+        let w = if b.s > a.s { ((s - a.s) / (b.s - a.s)).clamp(0.0, 1.0) } else { 0.0 };
         (i, w)
     }
 
@@ -126,12 +118,7 @@ impl Branch {
         let radius = a.radius + (b.radius - a.radius) * w;
         let t = a.frame.tangent * (1.0 - w) + b.frame.tangent * w;
         let n = a.frame.normal * (1.0 - w) + b.frame.normal * w;
-        CenterlineSample {
-            s: a.s + (b.s - a.s) * w,
-            point,
-            radius,
-            frame: Frame::from_tangent_and_hint(t, n),
-        }
+        CenterlineSample { s: a.s + (b.s - a.s) * w, point, radius, frame: Frame::from_tangent_and_hint(t, n) }
     }
 }
 
@@ -184,10 +171,7 @@ impl CenterlineTree {
                 start_junction: None,
                 end_junction: None,
             };
-            return Ok(CenterlineTree {
-                branches: vec![branch],
-                junctions: vec![],
-            });
+            return Ok(CenterlineTree { branches: vec![branch], junctions: vec![] });
         }
         let tags: Vec<_> = centerlines.polylines.iter().map(|l| l.cell_tags.clone()).collect();
         let skeleton = Skeleton::from_lines(lines, &tags, path)?;
@@ -218,10 +202,7 @@ fn clean_lines(centerlines: &Centerlines, surface: Option<&LumenSurface>) -> Res
     let mut out = Vec::with_capacity(centerlines.polylines.len());
     for (k, line) in centerlines.polylines.iter().enumerate() {
         if let Some(i) = line.points.iter().position(|p| !p.coords.iter().all(|c| c.is_finite())) {
-            return Err(Error::input(
-                path,
-                format!("{} has a non-finite coordinate", place(k, i)),
-            ));
+            return Err(Error::input(path, format!("{} has a non-finite coordinate", place(k, i))));
         }
         let radii =
             match (&line.radii, surface) {
@@ -233,23 +214,13 @@ fn clean_lines(centerlines: &Centerlines, surface: Option<&LumenSurface>) -> Res
                      (CSV) is required, or the lumen surface to measure it on",
                 )),
             };
-        let mut clean = Line {
-            points: vec![],
-            radii: vec![],
-            normals: line.normals.as_ref().map(|_| vec![]),
-        };
+        let mut clean = Line { points: vec![], radii: vec![], normals: line.normals.as_ref().map(|_| vec![]) };
         for (i, (p, r)) in line.points.iter().zip(&radii).enumerate() {
             if !r.is_finite() {
-                return Err(Error::input(
-                    path,
-                    format!("{} has a non-finite coordinate or radius", place(k, i)),
-                ));
+                return Err(Error::input(path, format!("{} has a non-finite coordinate or radius", place(k, i))));
             }
             if *r <= 0.0 {
-                return Err(Error::input(
-                    path,
-                    format!("{} has radius {r}: radii must be positive", place(k, i)),
-                ));
+                return Err(Error::input(path, format!("{} has radius {r}: radii must be positive", place(k, i))));
             }
             if clean.points.last().is_some_and(|q| (q - p).norm() < 1e-9) {
                 continue;
@@ -261,11 +232,7 @@ fn clean_lines(centerlines: &Centerlines, surface: Option<&LumenSurface>) -> Res
             }
         }
         if clean.points.len() < 2 {
-            let what = if several {
-                format!("polyline {k}")
-            } else {
-                "the centerline".to_string()
-            };
+            let what = if several { format!("polyline {k}") } else { "the centerline".to_string() };
             return Err(Error::input(path, format!("{what} has fewer than two distinct points")));
         }
         out.push(clean);
@@ -304,10 +271,7 @@ fn radii_from_surface(
             last_probe = *s;
         }
     }
-    let winding: Vec<f64> = probes
-        .par_iter()
-        .map(|&i| surface.winding_number(&line.points[i]))
-        .collect();
+    let winding: Vec<f64> = probes.par_iter().map(|&i| surface.winding_number(&line.points[i])).collect();
     let outside = probes.iter().zip(&winding).find(|(_, w)| w.abs() < INSIDE_WINDING);
     let on_surface = radii.iter().position(|r| *r <= 0.0);
     if let Some((&i, w)) = outside {
@@ -356,11 +320,10 @@ fn choose_inlet(skeleton: &Skeleton, point: Option<Point3<f64>>, path: &std::pat
         ));
     }
     if let Some(p) = point {
-        let nearest = ends.iter().copied().min_by(|&a, &b| {
-            (skeleton.nodes[a].point - p)
-                .norm()
-                .total_cmp(&(skeleton.nodes[b].point - p).norm())
-        });
+        let nearest = ends
+            .iter()
+            .copied()
+            .min_by(|&a, &b| (skeleton.nodes[a].point - p).norm().total_cmp(&(skeleton.nodes[b].point - p).norm()));
         return Ok(nearest.expect("ends is not empty"));
     }
     let mut sized: Vec<(f64, usize)> = ends.iter().map(|&v| (end_radius(skeleton, v), v)).collect();
@@ -379,22 +342,12 @@ fn end_radius(skeleton: &Skeleton, v: usize) -> f64 {
     let Some(edge) = skeleton.edges.iter().find(|e| e.ends.contains(&v)) else {
         return 0.0;
     };
-    let line = if edge.ends[0] == v {
-        edge.line.clone()
-    } else {
-        edge.line.reversed()
-    };
+    let line = if edge.ends[0] == v { edge.line.clone() } else { edge.line.reversed() };
     let mut sorted = line.radii.clone();
     sorted.sort_by(f64::total_cmp);
     let reach = (4.0 * sorted[sorted.len() / 2]).min(0.5 * line.length());
     let arcs = line.arcs();
-    let mut near: Vec<f64> = line
-        .radii
-        .iter()
-        .zip(&arcs)
-        .filter(|(_, s)| **s <= reach)
-        .map(|(r, _)| *r)
-        .collect();
+    let mut near: Vec<f64> = line.radii.iter().zip(&arcs).filter(|(_, s)| **s <= reach).map(|(r, _)| *r).collect();
     near.sort_by(f64::total_cmp);
     near[near.len() / 2]
 }
@@ -485,11 +438,7 @@ fn build_samples(
     let (mut pts, mut rad) = resample(&line.points, &line.radii, step);
     smooth(&mut pts, config.smoothing_passes);
     let starts_at_junction = matches!(first, FirstFrame::Carried(_));
-    smooth_scalar(
-        &mut rad,
-        config.radius_smoothing_passes,
-        [starts_at_junction, ends_at_junction],
-    );
+    smooth_scalar(&mut rad, config.radius_smoothing_passes, [starts_at_junction, ends_at_junction]);
 
     let tangents = tangents(&pts);
     let first = match first {
@@ -512,12 +461,7 @@ fn build_samples(
             if i > 0 {
                 s += (pts[i] - pts[i - 1]).norm();
             }
-            CenterlineSample {
-                s,
-                point: pts[i],
-                radius: rad[i],
-                frame: frames[i],
-            }
+            CenterlineSample { s, point: pts[i], radius: rad[i], frame: frames[i] }
         })
         .collect())
 }
@@ -539,11 +483,7 @@ fn resample(pts: &[Point3<f64>], rad: &[f64], step: f64) -> (Vec<Point3<f64>>, V
             j += 1;
         }
         let seg = cum[j + 1] - cum[j];
-        let w = if seg > 0.0 {
-            ((s - cum[j]) / seg).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
+        let w = if seg > 0.0 { ((s - cum[j]) / seg).clamp(0.0, 1.0) } else { 0.0 };
         out_p.push(pts[j] + (pts[j + 1] - pts[j]) * w);
         out_r.push(rad[j] + (rad[j + 1] - rad[j]) * w);
     }
@@ -624,11 +564,7 @@ fn parallel_transport(pts: &[Point3<f64>], tangents: &[Vector3<f64>], first: Fra
         };
         let v2 = tangents[i + 1] - t_l;
         let c2 = v2.dot(&v2);
-        let r = if c2 > 0.0 {
-            r_l - v2 * (2.0 / c2) * v2.dot(&r_l)
-        } else {
-            r_l
-        };
+        let r = if c2 > 0.0 { r_l - v2 * (2.0 / c2) * v2.dot(&r_l) } else { r_l };
         frames.push(Frame::from_tangent_and_hint(tangents[i + 1], r));
     }
     frames
@@ -648,24 +584,13 @@ mod tests {
                 Point3::new(a * t.cos(), a * t.sin(), c * t)
             })
             .collect();
-        CenterlinePolyline {
-            points,
-            radii: Some(vec![1.5; n]),
-            normals: None,
-            cell_tags: IndexMap::new(),
-        }
+        CenterlinePolyline { points, radii: Some(vec![1.5; n]), normals: None, cell_tags: IndexMap::new() }
     }
 
     #[test]
     fn frames_are_orthonormal_right_handed_and_twist_free() {
-        let cl = Centerlines {
-            polylines: vec![helix(400)],
-            source: "helix".into(),
-        };
-        let config = CenterlineConfig {
-            smoothing_passes: 0,
-            ..Default::default()
-        };
+        let cl = Centerlines { polylines: vec![helix(400)], source: "helix".into() };
+        let config = CenterlineConfig { smoothing_passes: 0, ..Default::default() };
         let tree = CenterlineTree::build(&cl, &config, None).unwrap();
         let b = &tree.branches[0];
         for w in b.samples.windows(2) {
@@ -700,29 +625,13 @@ mod tests {
     fn missing_radius_and_disconnected_polylines_are_clear_errors() {
         let mut l = helix(10);
         l.radii = None;
-        let cl = Centerlines {
-            polylines: vec![l],
-            source: "cl.vtp".into(),
-        };
-        let e = CenterlineTree::build(&cl, &CenterlineConfig::default(), None)
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("cl.vtp") && e.contains("MaximumInscribedSphereRadius"),
-            "{e}"
-        );
+        let cl = Centerlines { polylines: vec![l], source: "cl.vtp".into() };
+        let e = CenterlineTree::build(&cl, &CenterlineConfig::default(), None).unwrap_err().to_string();
+        assert!(e.contains("cl.vtp") && e.contains("MaximumInscribedSphereRadius"), "{e}");
         let mut far = helix(10);
         far.points.iter_mut().for_each(|p| p.x += 100.0);
-        let cl = Centerlines {
-            polylines: vec![helix(10), far],
-            source: "cl.vtp".into(),
-        };
-        let e = CenterlineTree::build(&cl, &CenterlineConfig::default(), None)
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("cl.vtp") && e.contains("polyline 1") && e.contains("does not connect"),
-            "{e}"
-        );
+        let cl = Centerlines { polylines: vec![helix(10), far], source: "cl.vtp".into() };
+        let e = CenterlineTree::build(&cl, &CenterlineConfig::default(), None).unwrap_err().to_string();
+        assert!(e.contains("cl.vtp") && e.contains("polyline 1") && e.contains("does not connect"), "{e}");
     }
 }

@@ -8,7 +8,11 @@ use vesselhex::pipeline::{run, MeshRequest};
 use vesselhex::units::LengthUnit;
 
 #[derive(Parser)]
-#[command(name = "vesselhex", version, about = "Structured hexahedral meshes of blood vessels: lumen O-grid and three-layer wall, with fibres, quality and solver decks")]
+#[command(
+    name = "vesselhex",
+    version,
+    about = "Structured hexahedral meshes of blood vessels: lumen O-grid and three-layer wall, with fibres, quality and solver decks"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -150,7 +154,9 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
     let extraction = extract_centerlines(&surface, &ExtractOptions { inlet, ends })?;
     write_vtp(&extraction.centerlines, units.from_mm(), &args.output)?;
     let split_tree = match &args.branch_split {
-        Some(path) => Some((vesselhex::centerline_extract::write_branch_split(&extraction, units.from_mm(), path)?, path)),
+        Some(path) => {
+            Some((vesselhex::centerline_extract::write_branch_split(&extraction, units.from_mm(), path)?, path))
+        }
         None => None,
     };
     if !args.quiet {
@@ -169,7 +175,11 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
                 e.radius * units.from_mm()
             );
         }
-        eprintln!("vesselhex: {} centerlines written to {}", extraction.centerlines.polylines.len(), args.output.display());
+        eprintln!(
+            "vesselhex: {} centerlines written to {}",
+            extraction.centerlines.polylines.len(),
+            args.output.display()
+        );
         if let Some((tree, path)) = split_tree {
             eprintln!(
                 "vesselhex: {} branches and {} junctions written as tracts to {}",

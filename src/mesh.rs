@@ -51,33 +51,13 @@ pub const FACE_CIRC_LOW: usize = 2;
 pub const FACE_CIRC_HIGH: usize = 4;
 
 /// The 12 edges of the canonical hexahedron.
-pub const HEX_EDGES: [[usize; 2]; 12] = [
-    [0, 1],
-    [1, 2],
-    [2, 3],
-    [3, 0],
-    [4, 5],
-    [5, 6],
-    [6, 7],
-    [7, 4],
-    [0, 4],
-    [1, 5],
-    [2, 6],
-    [3, 7],
-];
+pub const HEX_EDGES: [[usize; 2]; 12] =
+    [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4], [0, 4], [1, 5], [2, 6], [3, 7]];
 
 /// For each corner, its three neighbours ordered so that (n1-c, n2-c, n3-c) is right-handed
 /// in a valid element. Used by the scaled Jacobian.
-pub const HEX_CORNER_NEIGHBOURS: [[usize; 3]; 8] = [
-    [1, 3, 4],
-    [2, 0, 5],
-    [3, 1, 6],
-    [0, 2, 7],
-    [7, 5, 0],
-    [4, 6, 1],
-    [5, 7, 2],
-    [6, 4, 3],
-];
+pub const HEX_CORNER_NEIGHBOURS: [[usize; 3]; 8] =
+    [[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7], [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]];
 
 /// Abaqus/CalculiX face label ("S1".."S6") of canonical face `f`.
 pub fn abaqus_face_label(f: usize) -> &'static str {

@@ -311,8 +311,7 @@ fn closest_wall_point<V: AnalyticVessel + ?Sized>(v: &V, p: &Point3<f64>) -> Wal
     let o = circle_offset(v, p, s);
     let point = v.point(s) + o.dir * o.r;
     // Offset along the outward normal ∝ (1 - r u·t') u - r' t decides the side.
-    let side = (o.rho - o.r) * (1.0 - o.r * o.dir.dot(&v.curvature_vector(s)))
-        - o.a * v.radius_derivative(s);
+    let side = (o.rho - o.r) * (1.0 - o.r * o.dir.dot(&v.curvature_vector(s))) - o.a * v.radius_derivative(s);
     let distance = best.1.max(0.0).sqrt();
     WallPoint { s, point, signed_distance: if side < 0.0 { -distance } else { distance } }
 }
@@ -555,8 +554,7 @@ impl AnalyticVessel for Helical {
         let phi = s / self.speed();
         let (sin, cos) = phi.sin_cos();
         let normal = Vector3::new(-cos, -sin, 0.0);
-        let binormal =
-            Vector3::new(self.rise() * sin, -self.rise() * cos, self.helix_radius) / self.speed();
+        let binormal = Vector3::new(self.rise() * sin, -self.rise() * cos, self.helix_radius) / self.speed();
         let (sin_t, cos_t) = (self.torsion() * s).sin_cos();
         normal * cos_t - binormal * sin_t
     }
@@ -769,8 +767,9 @@ fn sweep<V: AnalyticVessel + ?Sized>(v: &V, circumferential: usize, axial_step_m
     for row in &rows {
         first.push(vertices.len() as u32);
         match *row {
-            Row::Circle { centre, u, w, radius } => vertices
-                .extend(angles.iter().map(|&(sin, cos)| centre + (u * cos + w * sin) * radius)),
+            Row::Circle { centre, u, w, radius } => {
+                vertices.extend(angles.iter().map(|&(sin, cos)| centre + (u * cos + w * sin) * radius))
+            }
             Row::Pole(p) => vertices.push(p),
         }
     }
@@ -839,11 +838,7 @@ fn circumradius(a: &Point3<f64>, b: &Point3<f64>, c: &Point3<f64>) -> f64 {
 /// (those of flat caps lie exactly in the cap plane) with a safety factor of 1.5. f32 part:
 /// rounding moves each vertex by at most `2⁻²⁴ |x|`, taken at the largest `|x|`. The bound is
 /// checked against dense sampling of every fixture in the tests.
-pub fn chordal_tolerance<V: AnalyticVessel + ?Sized>(
-    v: &V,
-    circumferential: usize,
-    axial_step_mm: f64,
-) -> f64 {
+pub fn chordal_tolerance<V: AnalyticVessel + ?Sized>(v: &V, circumferential: usize, axial_step_mm: f64) -> f64 {
     let sw = sweep(v, circumferential, axial_step_mm);
     let sphere = 1.0 / v.max_principal_curvature();
     let mut chordal: f64 = 0.0;
@@ -1012,9 +1007,8 @@ mod tests {
                 let theta = 0.7 + 1.3 * k as f64;
                 let (q, r) = (v.wall_point(s, theta), v.radius(s));
                 let e = (q - v.point(s)) / r;
-                let normal = (e * (1.0 - r * e.dot(&v.curvature_vector(s)))
-                    - v.tangent(s) * v.radius_derivative(s))
-                .normalize();
+                let normal =
+                    (e * (1.0 - r * e.dot(&v.curvature_vector(s))) - v.tangent(s) * v.radius_derivative(s)).normalize();
                 for frac in [-0.25, -0.01, -1e-7, 0.0, 1e-7, 0.01, 0.25] {
                     let delta = frac * r;
                     let p = q + normal * delta;
@@ -1025,12 +1019,7 @@ mod tests {
                         v.name(),
                         wp.signed_distance
                     );
-                    assert!(
-                        (wp.point - q).norm() < 1e-9,
-                        "{}: {}",
-                        v.name(),
-                        (wp.point - q).norm()
-                    );
+                    assert!((wp.point - q).norm() < 1e-9, "{}: {}", v.name(), (wp.point - q).norm());
                     assert!((wp.s - s).abs() < 1e-9);
                 }
                 assert!(v.distance_to_wall(&q).abs() < 1e-12, "{}", v.name());
@@ -1041,8 +1030,7 @@ mod tests {
     /// Straight-axis cones have a closed form: distance to a segment in the meridian half-plane.
     #[test]
     fn distance_matches_closed_form_for_straight_and_tapered() {
-        let cases: Vec<Box<dyn AnalyticVessel>> =
-            vec![Box::new(Straight::default()), Box::new(Tapered::default())];
+        let cases: Vec<Box<dyn AnalyticVessel>> = vec![Box::new(Straight::default()), Box::new(Tapered::default())];
         for v in cases {
             let (r0, r1, len) = (v.radius(0.0), v.radius(v.length()), v.length());
             for i in 0..200 {
@@ -1059,11 +1047,7 @@ mod tests {
                 let tt = (w.dot(&d) / d.norm_squared()).clamp(0.0, 1.0);
                 let expected = (w - d * tt).norm();
                 let got = v.distance_to_wall(&p);
-                assert!(
-                    (got.abs() - expected).abs() < 1e-11,
-                    "{} {p:?}: {got} vs {expected}",
-                    v.name()
-                );
+                assert!((got.abs() - expected).abs() < 1e-11, "{} {p:?}: {got} vs {expected}", v.name());
             }
         }
     }
@@ -1089,8 +1073,7 @@ mod tests {
     fn triangulation_vertices_are_on_the_surface_and_sizes_fit() {
         for v in all_fixtures() {
             let res = v.resolution();
-            let (vertices, triangles) =
-                triangulate(v.as_ref(), res.circumferential, res.axial_step_mm);
+            let (vertices, triangles) = triangulate(v.as_ref(), res.circumferential, res.axial_step_mm);
             for p in &vertices {
                 let scale = p.coords.norm().max(1.0);
                 assert!(v.distance_to_surface(p) < 1e-12 * scale, "{} {p:?}", v.name());
@@ -1103,8 +1086,7 @@ mod tests {
     fn chordal_tolerance_bounds_sampled_triangles() {
         for v in all_fixtures() {
             let res = v.resolution();
-            let (vertices, triangles) =
-                triangulate(v.as_ref(), res.circumferential, res.axial_step_mm);
+            let (vertices, triangles) = triangulate(v.as_ref(), res.circumferential, res.axial_step_mm);
             let tol = chordal_tolerance(v.as_ref(), res.circumferential, res.axial_step_mm);
             let mut worst: f64 = 0.0;
             for t in triangles.iter().step_by(3) {

@@ -31,80 +31,42 @@ fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
 /// tangent does), and its first tangent points away from the centre.
 fn check_contract(name: &str, tree: &CenterlineTree) {
     let b0 = &tree.branches[0];
-    assert!(
-        b0.parent.is_none() && b0.start_junction.is_none(),
-        "{name}: branch 0 starts at the inlet"
-    );
+    assert!(b0.parent.is_none() && b0.start_junction.is_none(), "{name}: branch 0 starts at the inlet");
     for (i, b) in tree.branches.iter().enumerate() {
         assert_eq!(b.name, format!("branch_{i}"), "{name}");
-        assert!(
-            b.samples.len() >= 3,
-            "{name}: {} has {} samples",
-            b.name,
-            b.samples.len()
-        );
+        assert!(b.samples.len() >= 3, "{name}: {} has {} samples", b.name, b.samples.len());
         if let Some(p) = b.parent {
             assert!(p < i, "{name}: parent {p} of branch {i} comes after it");
-            assert!(
-                tree.branches[p].daughters.contains(&i),
-                "{name}: {i} not among its parent's daughters"
-            );
+            assert!(tree.branches[p].daughters.contains(&i), "{name}: {i} not among its parent's daughters");
             assert_eq!(b.start_junction, tree.branches[p].end_junction, "{name}: branch {i}");
         }
         for s in &b.samples {
-            assert!(
-                s.radius > 0.0 && s.radius.is_finite(),
-                "{name}: radius {} in {}",
-                s.radius,
-                b.name
-            );
+            assert!(s.radius > 0.0 && s.radius.is_finite(), "{name}: radius {} in {}", s.radius, b.name);
             let f = s.frame;
             assert!((f.tangent.norm() - 1.0).abs() < 1e-12 && (f.normal.norm() - 1.0).abs() < 1e-12);
             assert!(f.tangent.dot(&f.normal).abs() < 1e-12, "{name}: frame not orthogonal");
-            assert!(
-                (f.normal.cross(&f.binormal) - f.tangent).norm() < 1e-12,
-                "{name}: frame not right-handed"
-            );
+            assert!((f.normal.cross(&f.binormal) - f.tangent).norm() < 1e-12, "{name}: frame not right-handed");
         }
         assert_eq!(b.daughters.is_empty(), b.end_junction.is_none(), "{name}: branch {i}");
     }
     for (j, junction) in tree.junctions.iter().enumerate() {
-        assert!(
-            junction.daughters.len() >= 2,
-            "{name}: junction {j} has {} daughters",
-            junction.daughters.len()
-        );
+        assert!(junction.daughters.len() >= 2, "{name}: junction {j} has {} daughters", junction.daughters.len());
         assert!(junction.radius > 0.0);
         let parent = &tree.branches[junction.parent];
         assert_eq!(parent.end_junction, Some(j));
         assert_eq!(parent.daughters, junction.daughters);
         let last = parent.samples[parent.samples.len() - 1];
-        assert_eq!(
-            last.point, junction.centre,
-            "{name}: parent of junction {j} does not end at its centre"
-        );
-        assert_eq!(
-            last.radius, junction.radius,
-            "{name}: parent of junction {j} ends with another radius"
-        );
+        assert_eq!(last.point, junction.centre, "{name}: parent of junction {j} does not end at its centre");
+        assert_eq!(last.radius, junction.radius, "{name}: parent of junction {j} ends with another radius");
         for &d in &junction.daughters {
             let daughter = &tree.branches[d];
             assert_eq!(daughter.parent, Some(junction.parent));
             assert_eq!(daughter.start_junction, Some(j));
             let first = daughter.samples[0];
-            assert_eq!(
-                first.point, junction.centre,
-                "{name}: daughter {d} does not start at junction {j}"
-            );
-            assert_eq!(
-                first.radius, junction.radius,
-                "{name}: daughter {d} starts with another radius"
-            );
+            assert_eq!(first.point, junction.centre, "{name}: daughter {d} does not start at junction {j}");
+            assert_eq!(first.radius, junction.radius, "{name}: daughter {d} starts with another radius");
             let away = daughter.samples[1].point - junction.centre;
-            assert!(
-                first.frame.tangent.dot(&away) > 0.0,
-                "{name}: daughter {d} starts towards the centre"
-            );
+            assert!(first.frame.tangent.dot(&away) > 0.0, "{name}: daughter {d} starts towards the centre");
             let turn_t = angle(&last.frame.tangent, &first.frame.tangent);
             let turn_n = angle(&last.frame.normal, &first.frame.normal);
             assert!(
@@ -130,16 +92,7 @@ fn check_contract(name: &str, tree: &CenterlineTree) {
 /// surface. Returns the worst relative radius error.
 fn check_junctions_in_lumen(name: &str, tree: &CenterlineTree, lumen: &LumenSurface) -> f64 {
     let mut worst: f64 = 0.0;
-    for (
-        j,
-        Junction {
-            centre,
-            radius,
-            parent,
-            daughters,
-        },
-    ) in tree.junctions.iter().enumerate()
-    {
+    for (j, Junction { centre, radius, parent, daughters }) in tree.junctions.iter().enumerate() {
         let distance = lumen.closest(centre).distance;
         let winding = lumen.winding_number(centre);
         let error = (radius - distance).abs() / distance;
@@ -151,18 +104,9 @@ fn check_junctions_in_lumen(name: &str, tree: &CenterlineTree, lumen: &LumenSurf
             centre.z,
             100.0 * (radius - distance) / distance
         );
-        assert!(
-            winding.abs() > 0.5,
-            "{name}: junction {j} lies outside the lumen (winding {winding})"
-        );
-        assert!(
-            distance < *radius * 1.25,
-            "{name}: junction {j}: distance {distance} to the surface, radius {radius}"
-        );
-        assert!(
-            error < 0.25,
-            "{name}: junction {j}: radius {radius} vs distance to the surface {distance}"
-        );
+        assert!(winding.abs() > 0.5, "{name}: junction {j} lies outside the lumen (winding {winding})");
+        assert!(distance < *radius * 1.25, "{name}: junction {j}: distance {distance} to the surface, radius {radius}");
+        assert!(error < 0.25, "{name}: junction {j}: radius {radius} vs distance to the surface {distance}");
         worst = worst.max(error);
     }
     worst
@@ -179,48 +123,13 @@ fn median_radius(tree: &CenterlineTree, b: usize) -> f64 {
 
 /// (case, surface, centerlines, unit, branches, junctions)
 const REAL: [(&str, &str, &str, LengthUnit, usize, usize); 5] = [
-    (
-        "vmtk_aortoiliac",
-        "aorta-surface-open-ends.stl",
-        "aorta-centerline.vtp",
-        LengthUnit::Mm,
-        3,
-        1,
-    ),
-    (
-        "vmtk_aortoiliac",
-        "aorta-surface-open-ends.stl",
-        "aorta-centerline-attribute-branches.vtp",
-        LengthUnit::Mm,
-        3,
-        1,
-    ),
-    (
-        "gmsh_carotid_bifurcation",
-        "carotid.stl",
-        "centerlinesCAROTID.vtk",
-        LengthUnit::M,
-        3,
-        1,
-    ),
-    (
-        "simvascular_demo_aortoiliac",
-        "demo.vtp",
-        "demo-centerlines.vtp",
-        LengthUnit::Cm,
-        3,
-        1,
-    ),
+    ("vmtk_aortoiliac", "aorta-surface-open-ends.stl", "aorta-centerline.vtp", LengthUnit::Mm, 3, 1),
+    ("vmtk_aortoiliac", "aorta-surface-open-ends.stl", "aorta-centerline-attribute-branches.vtp", LengthUnit::Mm, 3, 1),
+    ("gmsh_carotid_bifurcation", "carotid.stl", "centerlinesCAROTID.vtk", LengthUnit::M, 3, 1),
+    ("simvascular_demo_aortoiliac", "demo.vtp", "demo-centerlines.vtp", LengthUnit::Cm, 3, 1),
     // Ascending aorta -> arch + brachiocephalic-carotid trunk; trunk -> brachiocephalic + left
     // common carotid; arch -> left subclavian + descending aorta (see `aortic_arch_...` below).
-    (
-        "gmsh_aortic_arch",
-        "aorta.stl",
-        "centerlinesAORTA.vtk",
-        LengthUnit::M,
-        7,
-        3,
-    ),
+    ("gmsh_aortic_arch", "aorta.stl", "centerlinesAORTA.vtk", LengthUnit::M, 7, 3),
 ];
 
 fn load(vessels: &Path, case: &str, surface: &str, centerlines: &str, unit: LengthUnit) -> (LumenSurface, Centerlines) {
@@ -271,18 +180,11 @@ fn real_centerline_files_give_their_trees() {
 #[test]
 fn vmtk_paths_and_their_branch_split_agree() {
     let Some(vessels) = vessels_dir() else { return };
-    let (lumen, paths) = load(
-        &vessels,
-        "vmtk_aortoiliac",
-        "aorta-surface-open-ends.stl",
-        "aorta-centerline.vtp",
-        LengthUnit::Mm,
-    );
-    let split = read_centerlines(
-        &vessels.join("vmtk_aortoiliac/aorta-centerline-attribute-branches.vtp"),
-        LengthUnit::Mm,
-    )
-    .unwrap();
+    let (lumen, paths) =
+        load(&vessels, "vmtk_aortoiliac", "aorta-surface-open-ends.stl", "aorta-centerline.vtp", LengthUnit::Mm);
+    let split =
+        read_centerlines(&vessels.join("vmtk_aortoiliac/aorta-centerline-attribute-branches.vtp"), LengthUnit::Mm)
+            .unwrap();
     let a = build(&paths, &CenterlineConfig::default(), Some(&lumen));
     let b = build(&split, &CenterlineConfig::default(), Some(&lumen));
     // Without Blanking, the bifurcation tracts are one more group shared by both centerlines,
@@ -306,10 +208,7 @@ fn vmtk_paths_and_their_branch_split_agree() {
     let outlet = |tree: &CenterlineTree, b: usize| tree.branches[b].samples.last().unwrap().point;
     for (k, &d) in a.junctions[0].daughters.iter().enumerate() {
         let line = &paths.polylines[k].points;
-        assert!(
-            (outlet(&a, d) - line[line.len() - 1]).norm() < 1e-9,
-            "daughter {k} is not outlet {k}"
-        );
+        assert!((outlet(&a, d) - line[line.len() - 1]).norm() < 1e-9, "daughter {k} is not outlet {k}");
     }
 }
 
@@ -318,34 +217,19 @@ fn vmtk_paths_and_their_branch_split_agree() {
 #[test]
 fn carotid_tree_starts_at_the_common_carotid_unless_told() {
     let Some(vessels) = vessels_dir() else { return };
-    let (lumen, cl) = load(
-        &vessels,
-        "gmsh_carotid_bifurcation",
-        "carotid.stl",
-        "centerlinesCAROTID.vtk",
-        LengthUnit::M,
-    );
+    let (lumen, cl) =
+        load(&vessels, "gmsh_carotid_bifurcation", "carotid.stl", "centerlinesCAROTID.vtk", LengthUnit::M);
     let tree = build(&cl, &CenterlineConfig::default(), Some(&lumen));
     let first = tree.branches[0].samples[0].point;
     let cca_end = *cl.polylines[0].points.last().unwrap();
-    assert!(
-        (first - cca_end).norm() < 1e-9,
-        "inlet at {first:?}, not the common carotid's end {cca_end:?}"
-    );
+    assert!((first - cca_end).norm() < 1e-9, "inlet at {first:?}, not the common carotid's end {cca_end:?}");
     let parent = median_radius(&tree, 0);
-    let daughters: Vec<f64> = tree.junctions[0]
-        .daughters
-        .iter()
-        .map(|&d| median_radius(&tree, d))
-        .collect();
+    let daughters: Vec<f64> = tree.junctions[0].daughters.iter().map(|&d| median_radius(&tree, d)).collect();
     println!("carotid: common carotid median radius {parent:.3} mm, daughters {daughters:.3?} mm");
     assert!(daughters.iter().all(|&r| r < 0.8 * parent));
     // The file's own start as inlet, by a point near it.
     let start = cl.polylines[0].points[0];
-    let config = CenterlineConfig {
-        inlet_mm: Some([start.x + 0.5, start.y, start.z]),
-        ..Default::default()
-    };
+    let config = CenterlineConfig { inlet_mm: Some([start.x + 0.5, start.y, start.z]), ..Default::default() };
     let told = build(&cl, &config, Some(&lumen));
     assert_eq!(told.branches[0].samples[0].point, start);
     check_contract("carotid rooted at the file's start", &told);
@@ -363,13 +247,7 @@ fn carotid_tree_starts_at_the_common_carotid_unless_told() {
 #[test]
 fn aortic_arch_from_segments_without_radius() {
     let Some(vessels) = vessels_dir() else { return };
-    let (lumen, cl) = load(
-        &vessels,
-        "gmsh_aortic_arch",
-        "aorta.stl",
-        "centerlinesAORTA.vtk",
-        LengthUnit::M,
-    );
+    let (lumen, cl) = load(&vessels, "gmsh_aortic_arch", "aorta.stl", "centerlinesAORTA.vtk", LengthUnit::M);
     assert!(cl.polylines.iter().all(|l| l.radii.is_none()));
     let tree = build(&cl, &CenterlineConfig::default(), Some(&lumen));
     let ascending = tree.branches[0].samples[0];
@@ -377,33 +255,17 @@ fn aortic_arch_from_segments_without_radius() {
         "arch: inlet ({:.1}, {:.1}, {:.1}) mm, radius {:.2} mm",
         ascending.point.x, ascending.point.y, ascending.point.z, ascending.radius
     );
-    let ends: Vec<Point3<f64>> = cl
-        .polylines
-        .iter()
-        .flat_map(|l| [l.points[0], l.points[l.points.len() - 1]])
-        .collect();
-    let common = ends
-        .iter()
-        .filter(|p| ends.iter().filter(|q| (*q - *p).norm() < 1e-9).count() == 4)
-        .count();
+    let ends: Vec<Point3<f64>> =
+        cl.polylines.iter().flat_map(|l| [l.points[0], l.points[l.points.len() - 1]]).collect();
+    let common = ends.iter().filter(|p| ends.iter().filter(|q| (*q - *p).norm() < 1e-9).count() == 4).count();
     assert_eq!(common, 4, "the four paths share one end");
     assert!(ends.iter().any(|p| (p - ascending.point).norm() < 1e-9));
-    let outlets: Vec<usize> = (0..tree.branches.len())
-        .filter(|&b| tree.branches[b].daughters.is_empty())
-        .collect();
+    let outlets: Vec<usize> = (0..tree.branches.len()).filter(|&b| tree.branches[b].daughters.is_empty()).collect();
     assert_eq!(outlets.len(), 4);
     // Supra-aortic outlets point away from the arch, down in this file (-z).
     let top = |b: usize| tree.branches[b].samples.last().unwrap().point.z;
-    let supra: Vec<usize> = outlets
-        .iter()
-        .copied()
-        .filter(|&b| top(b) < ascending.point.z - 50.0)
-        .collect();
-    let descending: Vec<usize> = outlets
-        .iter()
-        .copied()
-        .filter(|&b| top(b) > ascending.point.z)
-        .collect();
+    let supra: Vec<usize> = outlets.iter().copied().filter(|&b| top(b) < ascending.point.z - 50.0).collect();
+    let descending: Vec<usize> = outlets.iter().copied().filter(|&b| top(b) > ascending.point.z).collect();
     assert_eq!((supra.len(), descending.len()), (3, 1), "outlets {outlets:?}");
     assert_eq!(tree.junctions.len(), 3);
     let j0 = &tree.junctions[0];
@@ -427,14 +289,7 @@ fn aortic_arch_from_segments_without_radius() {
         assert!(lumen.winding_number(&s.point).abs() > 0.5, "trunk point {:?} outside the lumen", s.point);
     }
 
-    let unmerged = build(
-        &cl,
-        &CenterlineConfig {
-            junction_merge_radii: 0.0,
-            ..Default::default()
-        },
-        Some(&lumen),
-    );
+    let unmerged = build(&cl, &CenterlineConfig { junction_merge_radii: 0.0, ..Default::default() }, Some(&lumen));
     check_contract("arch, unmerged", &unmerged);
     assert_eq!((unmerged.branches.len(), unmerged.junctions.len()), (7, 3));
     for (a, b) in unmerged.junctions.iter().zip(&tree.junctions) {
@@ -452,17 +307,11 @@ fn extracted_paths_give_the_vmtk_tree() {
     let ours = extract_centerlines(&surface, &Default::default()).unwrap();
     let t0 = Instant::now();
     let tree = build(&ours.centerlines, &CenterlineConfig::default(), Some(&lumen));
-    println!(
-        "vmtk_aortoiliac, our paths: tree in {:.3} s",
-        t0.elapsed().as_secs_f64()
-    );
+    println!("vmtk_aortoiliac, our paths: tree in {:.3} s", t0.elapsed().as_secs_f64());
     check_contract("aortoiliac, our paths", &tree);
     check_junctions_in_lumen("aortoiliac, our paths", &tree, &lumen);
-    let vmtk = build(
-        &read_centerlines(&dir.join("aorta-centerline.vtp"), LengthUnit::Mm).unwrap(),
-        &Default::default(),
-        None,
-    );
+    let vmtk =
+        build(&read_centerlines(&dir.join("aorta-centerline.vtp"), LengthUnit::Mm).unwrap(), &Default::default(), None);
     assert_eq!((tree.branches.len(), tree.junctions.len()), (3, 1));
     let gap = (tree.junctions[0].centre - vmtk.junctions[0].centre).norm() / vmtk.junctions[0].radius;
     println!("vmtk_aortoiliac: our junction {gap:.3} r from VMTK's");
@@ -475,23 +324,11 @@ fn extracted_paths_give_the_vmtk_tree() {
 fn branch_split_round_trip() {
     let Some(vessels) = vessels_dir() else { return };
     let dir = temp_dir("tree-split");
-    let aortoiliac = read_surface(
-        &vessels.join("vmtk_aortoiliac/aorta-surface-open-ends.stl"),
-        LengthUnit::Mm,
-    )
-    .unwrap();
+    let aortoiliac =
+        read_surface(&vessels.join("vmtk_aortoiliac/aorta-surface-open-ends.stl"), LengthUnit::Mm).unwrap();
     let extracted = extract_centerlines(&aortoiliac, &Default::default()).unwrap();
-    let (arch_lumen, arch) = load(
-        &vessels,
-        "gmsh_aortic_arch",
-        "aorta.stl",
-        "centerlinesAORTA.vtk",
-        LengthUnit::M,
-    );
-    let cases = [
-        ("aortoiliac (ours)", extracted.centerlines, None),
-        ("arch (gmsh)", arch, Some(&arch_lumen)),
-    ];
+    let (arch_lumen, arch) = load(&vessels, "gmsh_aortic_arch", "aorta.stl", "centerlinesAORTA.vtk", LengthUnit::M);
+    let cases = [("aortoiliac (ours)", extracted.centerlines, None), ("arch (gmsh)", arch, Some(&arch_lumen))];
     for (name, centerlines, lumen) in cases {
         let tree = build(&centerlines, &CenterlineConfig::default(), lumen);
         let split = branch_split(&tree, Path::new("split.vtp"));
@@ -504,31 +341,15 @@ fn branch_split_round_trip() {
         let paths = tree.branches.iter().filter(|b| b.daughters.is_empty()).count();
         let ids: std::collections::BTreeSet<i64> = back.polylines.iter().map(|l| tag(l, "CenterlineIds")).collect();
         assert_eq!(ids.len(), paths, "{name}: one centerline per outlet");
-        let blanked: std::collections::BTreeSet<i64> = back
-            .polylines
-            .iter()
-            .filter(|l| tag(l, "Blanking") == 1)
-            .map(|l| tag(l, "GroupIds"))
-            .collect();
-        let open: std::collections::BTreeSet<i64> = back
-            .polylines
-            .iter()
-            .filter(|l| tag(l, "Blanking") == 0)
-            .map(|l| tag(l, "GroupIds"))
-            .collect();
+        let blanked: std::collections::BTreeSet<i64> =
+            back.polylines.iter().filter(|l| tag(l, "Blanking") == 1).map(|l| tag(l, "GroupIds")).collect();
+        let open: std::collections::BTreeSet<i64> =
+            back.polylines.iter().filter(|l| tag(l, "Blanking") == 0).map(|l| tag(l, "GroupIds")).collect();
         assert!(blanked.is_disjoint(&open), "{name}: a group is both blanked and not");
-        assert_eq!(
-            blanked.len(),
-            tree.junctions.len(),
-            "{name}: one blanked group per junction"
-        );
+        assert_eq!(blanked.len(), tree.junctions.len(), "{name}: one blanked group per junction");
         assert_eq!(open.len(), tree.branches.len(), "{name}: one group per branch");
-        let first_groups: std::collections::BTreeSet<i64> = back
-            .polylines
-            .iter()
-            .filter(|l| tag(l, "TractIds") == 0)
-            .map(|l| tag(l, "GroupIds"))
-            .collect();
+        let first_groups: std::collections::BTreeSet<i64> =
+            back.polylines.iter().filter(|l| tag(l, "TractIds") == 0).map(|l| tag(l, "GroupIds")).collect();
         assert_eq!(first_groups.len(), 1, "{name}: the inlet branch is one group");
         for w in back.polylines.windows(2) {
             if tag(&w[0], "CenterlineIds") == tag(&w[1], "CenterlineIds") {
@@ -576,10 +397,7 @@ fn branch_split_round_trip() {
 /// A path of points every `step` from `a` to `b` (b included), radius `r`.
 fn segment(a: Point3<f64>, b: Point3<f64>, step: f64, r: f64) -> (Vec<Point3<f64>>, Vec<f64>) {
     let n = ((b - a).norm() / step).ceil() as usize;
-    (
-        (1..=n).map(|i| a + (b - a) * (i as f64 / n as f64)).collect(),
-        vec![r; n],
-    )
+    ((1..=n).map(|i| a + (b - a) * (i as f64 / n as f64)).collect(), vec![r; n])
 }
 
 /// An inlet-outlet path through the given corners, starting at `start`.
@@ -592,17 +410,8 @@ fn path(start: Point3<f64>, corners: &[(Point3<f64>, f64)], step: f64, offset: V
         radii.extend(q);
     }
     // A small sideways offset after the first point: two tools never give identical points.
-    let points = points
-        .iter()
-        .enumerate()
-        .map(|(i, p)| if i == 0 { *p } else { p + offset })
-        .collect();
-    CenterlinePolyline {
-        points,
-        radii: Some(radii),
-        normals: None,
-        cell_tags: IndexMap::new(),
-    }
+    let points = points.iter().enumerate().map(|(i, p)| if i == 0 { *p } else { p + offset }).collect();
+    CenterlinePolyline { points, radii: Some(radii), normals: None, cell_tags: IndexMap::new() }
 }
 
 /// Two overlapping paths of an analytic Y (parent radius 2 along z to (0, 0, 20), daughters of
@@ -613,13 +422,7 @@ fn analytic_y(half_angle: f64) -> (Centerlines, Point3<f64>) {
     let d = |sign: f64| j + Vector3::new(sign * half_angle.sin(), 0.0, half_angle.cos()) * 25.0;
     let a = path(o, &[(j, 2.0), (d(1.0), 1.5)], 0.2, Vector3::zeros());
     let b = path(o, &[(j, 2.0), (d(-1.0), 1.5)], 0.17, Vector3::new(0.0, 0.01, 0.0));
-    (
-        Centerlines {
-            polylines: vec![a, b],
-            source: "analytic Y".into(),
-        },
-        j,
-    )
+    (Centerlines { polylines: vec![a, b], source: "analytic Y".into() }, j)
 }
 
 #[test]
@@ -632,10 +435,7 @@ fn analytic_y_from_two_overlapping_paths() {
         assert_eq!((tree.branches.len(), tree.junctions.len()), (3, 1), "{name}");
         let junction = &tree.junctions[0];
         let off = (junction.centre - j).norm() / 2.0;
-        println!(
-            "{name}: junction {off:.4} r from the exact branch point, radius {:.3}",
-            junction.radius
-        );
+        println!("{name}: junction {off:.4} r from the exact branch point, radius {:.3}", junction.radius);
         assert!(off < 0.1, "{name}: junction {off} r from the branch point");
         assert!((junction.radius - 2.0).abs() < 1e-9 || (junction.radius - 1.5).abs() < 1e-9);
         // Daughters in the order of the outlets: +x first.
@@ -666,12 +466,7 @@ fn analytic_y_as_three_polylines_or_a_t_connection() {
         } else {
             (l.points[..=k].to_vec(), l.radii.as_ref().unwrap()[..=k].to_vec())
         };
-        CenterlinePolyline {
-            points,
-            radii: Some(radii),
-            normals: None,
-            cell_tags: IndexMap::new(),
-        }
+        CenterlinePolyline { points, radii: Some(radii), normals: None, cell_tags: IndexMap::new() }
     };
     let a = &cl.polylines[0];
     let three = Centerlines {
@@ -697,30 +492,19 @@ fn analytic_y_as_three_polylines_or_a_t_connection() {
     side_points.extend(side);
     let mut side_radii = vec![1.0];
     side_radii.extend(sr);
-    let t = Centerlines {
-        polylines: vec![line(main, mr), line(side_points, side_radii)],
-        source: "T".into(),
-    };
+    let t = Centerlines { polylines: vec![line(main, mr), line(side_points, side_radii)], source: "T".into() };
     let tree = build(&t, &CenterlineConfig::default(), None);
     check_contract("side branch", &tree);
     assert_eq!((tree.branches.len(), tree.junctions.len()), (3, 1));
     assert_eq!(tree.junctions[0].centre, Point3::new(0.0, 0.0, 30.0));
-    assert!(
-        tree.branches[0].samples[0].point.z < 0.0,
-        "inlet: the wide vessel's first end"
-    );
+    assert!(tree.branches[0].samples[0].point.z < 0.0, "inlet: the wide vessel's first end");
 }
 
 /// The -x daughter of the analytic Y, exactly at the branch point (no offset).
 fn analytic_y_exact() -> CenterlinePolyline {
     let a = f64::to_radians(30.0);
     let j = Point3::new(0.0, 0.0, 20.0);
-    path(
-        Point3::origin(),
-        &[(j, 2.0), (j + Vector3::new(-a.sin(), 0.0, a.cos()) * 25.0, 1.5)],
-        0.2,
-        Vector3::zeros(),
-    )
+    path(Point3::origin(), &[(j, 2.0), (j + Vector3::new(-a.sin(), 0.0, a.cos()) * 25.0, 1.5)], 0.2, Vector3::zeros())
 }
 
 /// Three paths whose two junctions are 0.5 r apart merge into one with three daughters; 3 r
@@ -734,19 +518,9 @@ fn close_junctions_merge() {
         let end = |x: f64, y: f64, from: Point3<f64>| from + Vector3::new(x, y, 1.0).normalize() * 25.0;
         let cl = Centerlines {
             polylines: vec![
-                path(
-                    o,
-                    &[(j1, 2.0), (j2, 2.0), (end(0.0, 0.0, j2), 2.0)],
-                    0.2,
-                    Vector3::zeros(),
-                ),
+                path(o, &[(j1, 2.0), (j2, 2.0), (end(0.0, 0.0, j2), 2.0)], 0.2, Vector3::zeros()),
                 path(o, &[(j1, 2.0), (end(1.0, 0.0, j1), 1.0)], 0.2, Vector3::zeros()),
-                path(
-                    o,
-                    &[(j1, 2.0), (j2, 2.0), (end(0.0, 1.0, j2), 1.0)],
-                    0.2,
-                    Vector3::zeros(),
-                ),
+                path(o, &[(j1, 2.0), (j2, 2.0), (end(0.0, 1.0, j2), 1.0)], 0.2, Vector3::zeros()),
             ],
             source: "two junctions".into(),
         };
@@ -758,14 +532,7 @@ fn close_junctions_merge() {
         } else {
             assert_eq!((tree.branches.len(), tree.junctions.len()), (5, 2), "gap {gap}");
         }
-        let off = build(
-            &cl,
-            &CenterlineConfig {
-                junction_merge_radii: 0.0,
-                ..Default::default()
-            },
-            None,
-        );
+        let off = build(&cl, &CenterlineConfig { junction_merge_radii: 0.0, ..Default::default() }, None);
         assert_eq!(off.junctions.len(), 2, "gap {gap}, merging off");
         check_contract("merging off", &off);
     }
@@ -776,21 +543,11 @@ fn bad_trees_are_clear_errors() {
     let line = |pts: &[[f64; 3]]| {
         let points: Vec<Point3<f64>> = pts.iter().map(|p| Point3::from(*p)).collect();
         let n = points.len();
-        CenterlinePolyline {
-            points,
-            radii: Some(vec![1.0; n]),
-            normals: None,
-            cell_tags: IndexMap::new(),
-        }
+        CenterlinePolyline { points, radii: Some(vec![1.0; n]), normals: None, cell_tags: IndexMap::new() }
     };
     let err = |polylines: Vec<CenterlinePolyline>| {
-        let cl = Centerlines {
-            polylines,
-            source: "cl.vtk".into(),
-        };
-        CenterlineTree::build(&cl, &CenterlineConfig::default(), None)
-            .unwrap_err()
-            .to_string()
+        let cl = Centerlines { polylines, source: "cl.vtk".into() };
+        CenterlineTree::build(&cl, &CenterlineConfig::default(), None).unwrap_err().to_string()
     };
     // A loop: a triangle with a tail.
     let e = err(vec![
@@ -807,34 +564,19 @@ fn bad_trees_are_clear_errors() {
         line(&[[0.0, 0.0, 10.0], [-5.0, 0.0, 20.0]]),
         line(&[[50.0, 0.0, 0.0], [50.0, 0.0, 10.0]]),
     ]);
-    assert!(
-        e.contains("polyline 3") && e.contains("does not connect") && e.contains("(50.000, 0.000, 0.000)"),
-        "{e}"
-    );
+    assert!(e.contains("polyline 3") && e.contains("does not connect") && e.contains("(50.000, 0.000, 0.000)"), "{e}");
     // Overlapping paths where one ends inside the other.
     let e = err(vec![
-        line(&[
-            [0.0, 0.0, 0.0],
-            [0.0, 0.0, 5.0],
-            [0.0, 0.0, 10.0],
-            [0.0, 0.0, 15.0],
-            [0.0, 0.0, 20.0],
-        ]),
+        line(&[[0.0, 0.0, 0.0], [0.0, 0.0, 5.0], [0.0, 0.0, 10.0], [0.0, 0.0, 15.0], [0.0, 0.0, 20.0]]),
         line(&[[0.0, 0.0, 0.0], [0.0, 0.0, 5.0], [0.0, 0.0, 10.0]]),
         line(&[[0.0, 0.0, 0.0], [0.0, 0.0, 5.0], [0.0, 0.0, 10.0], [5.0, 0.0, 15.0]]),
     ]);
-    assert!(
-        e.contains("centerline 1 ends") && e.contains("inside another path"),
-        "{e}"
-    );
+    assert!(e.contains("centerline 1 ends") && e.contains("inside another path"), "{e}");
     // No radius and no surface to measure it on.
     let mut l = line(&[[0.0, 0.0, 0.0], [0.0, 0.0, 10.0]]);
     l.radii = None;
-    let e = err(vec![
-        l.clone(),
-        line(&[[0.0, 0.0, 10.0], [0.0, 5.0, 20.0]]),
-        line(&[[0.0, 0.0, 10.0], [0.0, -5.0, 20.0]]),
-    ]);
+    let e =
+        err(vec![l.clone(), line(&[[0.0, 0.0, 10.0], [0.0, 5.0, 20.0]]), line(&[[0.0, 0.0, 10.0], [0.0, -5.0, 20.0]])]);
     assert!(e.contains("no radius") && e.contains("surface"), "{e}");
 }
 
@@ -842,22 +584,14 @@ fn bad_trees_are_clear_errors() {
 #[test]
 fn a_path_outside_the_lumen_is_named() {
     let Some(vessels) = vessels_dir() else { return };
-    let (lumen, mut cl) = load(
-        &vessels,
-        "gmsh_aortic_arch",
-        "aorta.stl",
-        "centerlinesAORTA.vtk",
-        LengthUnit::M,
-    );
+    let (lumen, mut cl) = load(&vessels, "gmsh_aortic_arch", "aorta.stl", "centerlinesAORTA.vtk", LengthUnit::M);
     // Bend the end of the third path 40 mm sideways, out of its vessel.
     let p = &mut cl.polylines[2].points;
     let n = p.len();
     for (k, q) in p.iter_mut().enumerate().take(n / 3) {
         q.x += 40.0 * (1.0 - k as f64 / (n / 3) as f64).min(0.8) / 0.8;
     }
-    let e = CenterlineTree::build(&cl, &CenterlineConfig::default(), Some(&lumen))
-        .unwrap_err()
-        .to_string();
+    let e = CenterlineTree::build(&cl, &CenterlineConfig::default(), Some(&lumen)).unwrap_err().to_string();
     assert!(
         e.contains("centerlinesAORTA.vtk") && e.contains("polyline 2 leaves the lumen") && e.contains("aorta.stl"),
         "{e}"
@@ -868,18 +602,12 @@ fn a_path_outside_the_lumen_is_named() {
 #[test]
 fn single_polyline_and_its_inlet() {
     let (cl, _) = analytic_y(0.5);
-    let one = Centerlines {
-        polylines: vec![cl.polylines[0].clone()],
-        source: "one".into(),
-    };
+    let one = Centerlines { polylines: vec![cl.polylines[0].clone()], source: "one".into() };
     let tree = build(&one, &CenterlineConfig::default(), None);
     assert_eq!((tree.branches.len(), tree.junctions.len()), (1, 0));
     assert_eq!(tree.branches[0].samples[0].point, one.polylines[0].points[0]);
     let last = *one.polylines[0].points.last().unwrap();
-    let config = CenterlineConfig {
-        inlet_mm: Some([last.x, last.y, last.z + 1.0]),
-        ..Default::default()
-    };
+    let config = CenterlineConfig { inlet_mm: Some([last.x, last.y, last.z + 1.0]), ..Default::default() };
     let reversed = build(&one, &config, None);
     assert_eq!(reversed.branches[0].samples[0].point, last);
     check_contract("single", &reversed);

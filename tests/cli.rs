@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{fixture, files_under, mesh_cli, path_str, temp_dir, vesselhex};
+use common::{files_under, fixture, mesh_cli, path_str, temp_dir, vesselhex};
 use std::path::Path;
 
 #[test]
@@ -37,7 +37,8 @@ fn outputs_and_report_keys() {
     }
     assert!(r["timings_s"].as_object().unwrap().len() >= 5);
     // nothing else left in the output folder
-    let mut names: Vec<String> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    let mut names: Vec<String> =
+        std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     names.sort();
     assert_eq!(names, ["mesh.vtu", "report.json"]);
 }
@@ -94,7 +95,10 @@ print(r.GetOutput().GetNumberOfCells(), min(a.GetValue(i) for i in range(a.GetNu
         let mut it = text.split_whitespace();
         let cells: u64 = it.next().unwrap().parse().unwrap();
         let vtk_min: f64 = it.next().unwrap().parse().unwrap();
-        let ours = r["lumen"]["scaled_jacobian"]["min"].as_f64().unwrap().min(r["wall"]["scaled_jacobian"]["min"].as_f64().unwrap());
+        let ours = r["lumen"]["scaled_jacobian"]["min"]
+            .as_f64()
+            .unwrap()
+            .min(r["wall"]["scaled_jacobian"]["min"].as_f64().unwrap());
         println!("{name}: vtkMeshQuality min scaled Jacobian {vtk_min:.6}, report {ours:.6}");
         assert_eq!(cells, r["elements"].as_u64().unwrap());
         assert!((vtk_min - ours).abs() <= 0.02, "{name}: VTK {vtk_min} vs report {ours}");
@@ -188,7 +192,8 @@ fn bad_inputs_fail_clearly_and_leave_nothing() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("output") && !err.contains("panicked"), "{err}");
     // unknown format
-    let o = vesselhex(&["mesh", "--surface", &stl, "--centerlines", &csv, "--output", &outs, "--formats", "vtu,nastran"]);
+    let o =
+        vesselhex(&["mesh", "--surface", &stl, "--centerlines", &csv, "--output", &outs, "--formats", "vtu,nastran"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("nastran"));
     assert!(files_under(&out).is_empty());
 }
@@ -200,7 +205,10 @@ fn write_stl_without_triangles_near(src: &str, dst: &Path, z: f64) {
     let mut kept = vec![];
     for t in 0..n {
         let rec = &b[84 + 50 * t..84 + 50 * (t + 1)];
-        let zc: f64 = (0..3).map(|v| f32::from_le_bytes(rec[12 + 12 * v + 8..12 + 12 * v + 12].try_into().unwrap()) as f64).sum::<f64>() / 3.0;
+        let zc: f64 = (0..3)
+            .map(|v| f32::from_le_bytes(rec[12 + 12 * v + 8..12 + 12 * v + 12].try_into().unwrap()) as f64)
+            .sum::<f64>()
+            / 3.0;
         if (zc - z).abs() > 1.0 {
             kept.extend_from_slice(rec);
         }

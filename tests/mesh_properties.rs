@@ -46,7 +46,11 @@ fn quality_and_fidelity_bars_hold_on_every_fixture() {
                 m.accuracy.node_to_surface_um.max
             );
             assert!(min_sj >= 0.3, "{name} {preset:?}: min scaled Jacobian {min_sj}");
-            assert!(wall.all.scaled_jacobian.mean >= 0.9, "{name} {preset:?}: wall mean SJ {}", wall.all.scaled_jacobian.mean);
+            assert!(
+                wall.all.scaled_jacobian.mean >= 0.9,
+                "{name} {preset:?}: wall mean SJ {}",
+                wall.all.scaled_jacobian.mean
+            );
             assert!(lumen.equiangle_skew.mean <= 0.3, "{name} {preset:?}: lumen skew {}", lumen.equiangle_skew.mean);
             // Every lumen-surface node on the input triangles (exact point-triangle distance)...
             assert!(m.accuracy.node_to_surface_um.max < 0.01, "{name}: {:?}", m.accuracy);
@@ -163,7 +167,9 @@ fn capped_ends_are_avoided() {
             assert!(s > 0.0 && s < len, "{name}: node {n} beyond the tube part (s = {s})");
             // the triangle it lies on belongs to the tube, not to a cap
             let tri = surface.triangles[surface.closest(&p).triangle as usize];
-            let c = Point3::from(tri.iter().fold(nalgebra::Vector3::zeros(), |a, &v| a + surface.vertices[v as usize].coords) / 3.0);
+            let c = Point3::from(
+                tri.iter().fold(nalgebra::Vector3::zeros(), |a, &v| a + surface.vertices[v as usize].coords) / 3.0,
+            );
             assert!((c - shape.point(0.0)).dot(&shape.tangent(0.0)) > 0.0, "{name}: node {n} on the inlet cap");
             assert!((c - shape.point(len)).dot(&shape.tangent(len)) < 0.0, "{name}: node {n} on the outlet cap");
         }

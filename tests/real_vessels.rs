@@ -42,7 +42,8 @@ fn check(name: &str, surface: &TriangleSurface, centerlines: &Centerlines) {
             let t = &mesh.triads[e];
             assert!((t.e_circ.cross(&t.e_long) - t.e_rad).norm() < 1e-9);
             let c = Point3::from(mesh.corners(e).iter().fold(Vector3::zeros(), |a, p| a + p.coords) / 8.0);
-            let nearest = branch.samples.iter().min_by(|a, b| (a.point - c).norm().total_cmp(&(b.point - c).norm())).unwrap();
+            let nearest =
+                branch.samples.iter().min_by(|a, b| (a.point - c).norm().total_cmp(&(b.point - c).norm())).unwrap();
             assert!(t.e_rad.dot(&(c - nearest.point)) > 0.0, "{name}: e_rad inward at element {e}");
         }
     }

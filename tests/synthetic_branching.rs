@@ -31,17 +31,9 @@ struct Mesh {
 fn read_stl(path: &Path) -> Mesh {
     let bytes = fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let (surface, report) = read_surface_with_report(path, LengthUnit::Mm).unwrap();
-    assert_eq!(
-        bytes.len(),
-        84 + 50 * surface.triangles.len(),
-        "{}: not a binary STL",
-        path.display()
-    );
+    assert_eq!(bytes.len(), 84 + 50 * surface.triangles.len(), "{}: not a binary STL", path.display());
     assert_eq!(report.degenerate_triangles_dropped, 0, "{}", path.display());
-    Mesh {
-        vertices: surface.vertices,
-        triangles: surface.triangles,
-    }
+    Mesh { vertices: surface.vertices, triangles: surface.triangles }
 }
 
 /// The committed fixtures as the mesher reads them: each default fixture with its STL and VTP.
@@ -90,31 +82,19 @@ fn topology(mesh: &Mesh) -> Topology {
     let mut directed = HashSet::new();
     let mut edges = HashMap::new();
     for t in &mesh.triangles {
-        assert!(
-            t[0] != t[1] && t[1] != t[2] && t[2] != t[0],
-            "degenerate triangle {t:?}"
-        );
+        assert!(t[0] != t[1] && t[1] != t[2] && t[2] != t[0], "degenerate triangle {t:?}");
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
-            assert!(
-                directed.insert((a, b)),
-                "edge {a}-{b} wound the same way twice (flipped or non-manifold)"
-            );
+            assert!(directed.insert((a, b)), "edge {a}-{b} wound the same way twice (flipped or non-manifold)");
             *edges.entry((a.min(b), a.max(b))).or_insert(0usize) += 1;
         }
     }
-    assert!(
-        edges.values().all(|&n| n <= 2),
-        "an edge is shared by more than two triangles"
-    );
+    assert!(edges.values().all(|&n| n <= 2), "an edge is shared by more than two triangles");
     // Boundary edges, directed as their single triangle winds them.
     let mut next = HashMap::new();
     for &(a, b) in &directed {
         if !directed.contains(&(b, a)) {
-            assert!(
-                next.insert(a, b).is_none(),
-                "vertex {a} starts two boundary edges (pinched boundary)"
-            );
+            assert!(next.insert(a, b).is_none(), "vertex {a} starts two boundary edges (pinched boundary)");
         }
     }
     let mut starts: Vec<u32> = next.keys().copied().collect();
@@ -205,19 +185,11 @@ fn assert_open_ends_only(name: &str, mesh: &Mesh, openings: &[Opening]) {
             assert!(step.abs() < 0.5, "{name}: loop vertices jump by {step} rad");
             turn += step;
         }
-        assert!(
-            (turn.abs() - std::f64::consts::TAU).abs() < 1e-9,
-            "{name}: loop turns by {turn}"
-        );
+        assert!((turn.abs() - std::f64::consts::TAU).abs() < 1e-9, "{name}: loop turns by {turn}");
     }
     assert!(matched.iter().all(|&n| n == 1), "{name}: loops per opening {matched:?}");
     let euler = mesh.vertices.len() as i64 - topo.edges.len() as i64 + mesh.triangles.len() as i64;
-    assert_eq!(
-        euler,
-        2 - openings.len() as i64,
-        "{name}: not a sphere with {} holes",
-        openings.len()
-    );
+    assert_eq!(euler, 2 - openings.len() as i64, "{name}: not a sphere with {} holes", openings.len());
 }
 
 /// What every written surface must be: [`assert_open_ends_only`], and no triangle angle under 5°.
@@ -298,10 +270,7 @@ fn regenerated_fixtures_are_byte_identical_to_the_committed_ones() {
     let written = write_all_branching_fixtures(&scratch.0).unwrap();
     assert_eq!(written.len(), 2 * default_branching_fixtures().unwrap().len());
     assert_same_as_committed(&written);
-    let leftovers: Vec<_> = fs::read_dir(&scratch.0)
-        .unwrap()
-        .map(|e| e.unwrap().file_name())
-        .collect();
+    let leftovers: Vec<_> = fs::read_dir(&scratch.0).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(leftovers.len(), 4, "temporary files left behind: {leftovers:?}");
 }
 
@@ -314,28 +283,15 @@ fn committed_files_are_small_and_read_back() {
             assert!(size < 2_000_000, "{}: {size} bytes", path.display());
         }
         let openings = fixture.openings();
-        assert_eq!(
-            centerlines.polylines.len(),
-            openings.len() - 1,
-            "{}: one path per outlet",
-            fixture.name
-        );
+        assert_eq!(centerlines.polylines.len(), openings.len() - 1, "{}: one path per outlet", fixture.name);
         for (id, line) in centerlines.polylines.iter().enumerate() {
             assert_eq!(line.cell_tags.get("CenterlineIds"), Some(&(id as i64)));
             let radii = line.radii.as_ref().expect("MaximumInscribedSphereRadius");
             assert_eq!(radii.len(), line.points.len());
             // Inlet to outlet: the parent's free end to this path's end circle, exactly.
-            assert!(
-                (line.points[0] - openings[0].centre).norm() < 1e-12,
-                "{}: path {id} start",
-                fixture.name
-            );
+            assert!((line.points[0] - openings[0].centre).norm() < 1e-12, "{}: path {id} start", fixture.name);
             let end = *line.points.last().unwrap();
-            assert!(
-                (end - openings[id + 1].centre).norm() < 1e-12,
-                "{}: path {id} end",
-                fixture.name
-            );
+            assert!((end - openings[id + 1].centre).norm() < 1e-12, "{}: path {id} end", fixture.name);
             for pair in line.points.windows(2) {
                 let step = (pair[1] - pair[0]).norm();
                 assert!(
@@ -363,24 +319,13 @@ fn vertices_lie_on_the_analytic_surface() {
     for ((fixture, surface), (_, mesh, _)) in generated_fixtures().iter().zip(committed_fixtures()) {
         let f = fixture.lumen_function();
         // In f64, as generated: on F = 0 to 1e-12 relative (first-order distance |F| / |∇F|).
-        let worst = surface
-            .vertices
-            .iter()
-            .map(|p| f.distance_estimate(p) / p.coords.norm().max(1.0))
-            .fold(0.0, f64::max);
-        assert!(
-            worst < 1e-12,
-            "{}: a vertex is {worst:e} (relative) off the surface",
-            fixture.name
-        );
+        let worst =
+            surface.vertices.iter().map(|p| f.distance_estimate(p) / p.coords.norm().max(1.0)).fold(0.0, f64::max);
+        assert!(worst < 1e-12, "{}: a vertex is {worst:e} (relative) off the surface", fixture.name);
         // As committed: within f32 rounding of it.
         for p in &mesh.vertices {
             let d = f.distance_estimate(p);
-            assert!(
-                d <= f32_rounding(p),
-                "{}: stored vertex {p:?} is {d:e} mm off",
-                fixture.name
-            );
+            assert!(d <= f32_rounding(p), "{}: stored vertex {p:?} is {d:e} mm off", fixture.name);
         }
         println!("{}: worst relative vertex offset in f64 {worst:.1e}", fixture.name);
     }
@@ -412,11 +357,7 @@ fn far_from_the_junction_the_surface_is_the_exact_tube() {
                 }
             }
         }
-        assert!(
-            checked > surface.vertices.len() / 2,
-            "{}: only {checked} vertices past the separations",
-            fixture.name
-        );
+        assert!(checked > surface.vertices.len() / 2, "{}: only {checked} vertices past the separations", fixture.name);
     }
 }
 
@@ -443,21 +384,13 @@ fn normals_point_out_of_the_lumen_and_the_volume_matches() {
             let normal = (b - a).cross(&(c - a)).normalize();
             let centroid = Point3::from((a.coords + b.coords + c.coords) / 3.0);
             let outward = f.value_gradient(&centroid).1.normalize();
-            assert!(
-                normal.dot(&outward) > 0.5,
-                "{}: triangle {t:?} faces {normal:?}",
-                fixture.name
-            );
+            assert!(normal.dot(&outward) > 0.5, "{}: triangle {t:?} faces {normal:?}", fixture.name);
         }
         // Closed by flat caps, the surface bounds the lumen with a positive volume.
         let volume = signed_volume(&capped(&mesh));
         let expected = numerical_volume(&fixture, 0.05);
         let rel = (volume - expected) / expected;
-        assert!(
-            volume > 0.0 && rel.abs() < 0.01,
-            "{}: volume {volume} vs {expected} ({rel:+.4})",
-            fixture.name
-        );
+        assert!(volume > 0.0 && rel.abs() < 0.01, "{}: volume {volume} vs {expected} ({rel:+.4})", fixture.name);
         // Sanity of the reference: the blended union holds at least the plain tubes' volume
         // minus their overlap, bounded by the sum of the tubes.
         let tubes: f64 = fixture
@@ -465,15 +398,8 @@ fn normals_point_out_of_the_lumen_and_the_volume_matches() {
             .iter()
             .map(|t| std::f64::consts::PI * t.radius * t.radius * (t.back.length() + t.front.length()))
             .sum();
-        assert!(
-            expected < tubes * 1.02 && expected > tubes * 0.9,
-            "{}: {expected} vs tubes {tubes}",
-            fixture.name
-        );
-        println!(
-            "{}: volume {volume:.3} mm³, grid {expected:.3} ({rel:+.2e}), tubes {tubes:.3}",
-            fixture.name
-        );
+        assert!(expected < tubes * 1.02 && expected > tubes * 0.9, "{}: {expected} vs tubes {tubes}", fixture.name);
+        println!("{}: volume {volume:.3} mm³, grid {expected:.3} ({rel:+.2e}), tubes {tubes:.3}", fixture.name);
     }
 }
 
@@ -500,10 +426,7 @@ fn centerline_points_are_inside_and_radii_match_the_surface() {
                 if k == 0 || k == n - 1 {
                     // On a cap (at its fan's centre, where the winding number is undefined):
                     // inside just before it, outside just past it.
-                    let o = openings
-                        .iter()
-                        .find(|o| (o.centre - p).norm() < 1e-12)
-                        .expect("an end circle centre");
+                    let o = openings.iter().find(|o| (o.centre - p).norm() < 1e-12).expect("an end circle centre");
                     let before = closed.winding_number(&(p - o.outward * 0.01));
                     let past = closed.winding_number(&(p + o.outward * 0.01));
                     assert!(
@@ -519,21 +442,9 @@ fn centerline_points_are_inside_and_radii_match_the_surface() {
                 // of it, at most their sag nearer: e² / 8ρ for edges up to e on a surface of
                 // curvature radius ρ >= the smallest tube radius (the fillets are flatter).
                 let to_triangles = open.closest(p).distance;
-                let to_vertex = mesh
-                    .vertices
-                    .iter()
-                    .map(|v| (v - p).norm())
-                    .fold(f64::INFINITY, f64::min);
-                assert!(
-                    r <= to_vertex + 1e-6,
-                    "{}: radius {r} > vertex distance {to_vertex}",
-                    fixture.name
-                );
-                assert!(
-                    (r - to_triangles).abs() < sag_bound,
-                    "{}: radius {r} vs {to_triangles}",
-                    fixture.name
-                );
+                let to_vertex = mesh.vertices.iter().map(|v| (v - p).norm()).fold(f64::INFINITY, f64::min);
+                assert!(r <= to_vertex + 1e-6, "{}: radius {r} > vertex distance {to_vertex}", fixture.name);
+                assert!((r - to_triangles).abs() < sag_bound, "{}: radius {r} vs {to_triangles}", fixture.name);
                 worst_any = worst_any.max((r - to_triangles).abs() / r);
                 // Far from the junction: exactly the tube radius, and where the lumen is convex the
                 // triangles are inside it (nearer by their sag).
@@ -592,11 +503,7 @@ fn junction_radius_is_the_inscribed_sphere() {
                 );
             }
             if o.tube != 0 {
-                let k = line
-                    .points
-                    .iter()
-                    .position(|p| *p == t.anchor)
-                    .expect("anchor on the path");
+                let k = line.points.iter().position(|p| *p == t.anchor).expect("anchor on the path");
                 let widest = radii[k..].iter().copied().fold(0.0, f64::max);
                 assert!(
                     widest > 1.1 * t.radius,
@@ -612,19 +519,12 @@ fn junction_radius_is_the_inscribed_sphere() {
 #[test]
 fn a_sweep_of_angles_and_ratios_gives_manifold_outward_surfaces() {
     let scratch = ScratchDir::new("sweep");
-    println!(
-        "{:<14} {:>9} {:>9} {:>10} {:>9}",
-        "fixture", "triangles", "vertices", "min angle", "time (s)"
-    );
+    println!("{:<14} {:>9} {:>9} {:>10} {:>9}", "fixture", "triangles", "vertices", "min angle", "time (s)");
     for angle in [30.0, 45.0, 60.0, 90.0] {
         for ratio in [1.0, 2.0, 4.0] {
             let cases = [
-                YBifurcation::symmetric(angle, ratio)
-                    .fixture(&format!("y_{angle}_{ratio}"))
-                    .unwrap(),
-                TJunction::with(angle, ratio)
-                    .fixture(&format!("t_{angle}_{ratio}"))
-                    .unwrap(),
+                YBifurcation::symmetric(angle, ratio).fixture(&format!("y_{angle}_{ratio}")).unwrap(),
+                TJunction::with(angle, ratio).fixture(&format!("t_{angle}_{ratio}")).unwrap(),
             ];
             for fixture in cases {
                 let start = Instant::now();
@@ -661,77 +561,23 @@ fn bad_parameters_are_refused_with_the_parameter_named() {
         other => panic!("{what}: expected a refusal, got {other:?}"),
     };
     refused(
-        YBifurcation {
-            half_angles_deg: [0.0, 30.0],
-            ..YBifurcation::default()
-        }
-        .fixture("y"),
+        YBifurcation { half_angles_deg: [0.0, 30.0], ..YBifurcation::default() }.fixture("y"),
         "half-angle of daughter 1",
     );
     refused(
-        YBifurcation {
-            half_angles_deg: [30.0, 95.0],
-            ..YBifurcation::default()
-        }
-        .fixture("y"),
+        YBifurcation { half_angles_deg: [30.0, 95.0], ..YBifurcation::default() }.fixture("y"),
         "half-angle of daughter 2",
     );
     refused(
-        YBifurcation {
-            daughter_radii: [1.0, -1.0],
-            ..YBifurcation::default()
-        }
-        .fixture("y"),
+        YBifurcation { daughter_radii: [1.0, -1.0], ..YBifurcation::default() }.fixture("y"),
         "radius of daughter 2",
     );
-    refused(
-        YBifurcation {
-            parent_radius: f64::NAN,
-            ..YBifurcation::default()
-        }
-        .fixture("y"),
-        "parent radius",
-    );
-    refused(
-        TJunction {
-            branch_radius: 3.0,
-            ..TJunction::default()
-        }
-        .fixture("t"),
-        "branch radius",
-    );
-    refused(
-        TJunction {
-            branch_angle_deg: 5.0,
-            ..TJunction::default()
-        }
-        .fixture("t"),
-        "branch angle",
-    );
-    refused(
-        TJunction {
-            cell_size: Some(1.0),
-            ..TJunction::default()
-        }
-        .fixture("t"),
-        "cell size",
-    );
-    refused(
-        TJunction {
-            free_length_radii: 1.0,
-            ..TJunction::default()
-        }
-        .fixture("t"),
-        "free length",
-    );
-    refused(
-        TJunction {
-            blend_width: Some(0.0),
-            ..TJunction::default()
-        }
-        .fixture("t"),
-        "blend width",
-    );
+    refused(YBifurcation { parent_radius: f64::NAN, ..YBifurcation::default() }.fixture("y"), "parent radius");
+    refused(TJunction { branch_radius: 3.0, ..TJunction::default() }.fixture("t"), "branch radius");
+    refused(TJunction { branch_angle_deg: 5.0, ..TJunction::default() }.fixture("t"), "branch angle");
+    refused(TJunction { cell_size: Some(1.0), ..TJunction::default() }.fixture("t"), "cell size");
+    refused(TJunction { free_length_radii: 1.0, ..TJunction::default() }.fixture("t"), "free length");
+    refused(TJunction { blend_width: Some(0.0), ..TJunction::default() }.fixture("t"), "blend width");
 }
 
 /// Writes the branching fixtures into `fixtures/` (run on purpose only).
@@ -769,9 +615,6 @@ fn output_does_not_depend_on_the_thread_count() {
     });
     assert!(surface == single, "the surface depends on the thread count");
     for (a, b) in lines.polylines.iter().zip(&single_lines.polylines) {
-        assert!(
-            a.points == b.points && a.radii == b.radii,
-            "the centerlines depend on the thread count"
-        );
+        assert!(a.points == b.points && a.radii == b.radii, "the centerlines depend on the thread count");
     }
 }

@@ -115,18 +115,10 @@ impl Line {
     /// The closest point among the segments between points `lo` and `hi`.
     fn closest_on(&self, p: &Point3<f64>, lo: usize, hi: usize) -> (f64, usize, f64) {
         let mut best = (f64::INFINITY, lo, 0.0);
-        for (k, w) in self.points[lo..=hi.max(lo + 1)]
-            .windows(2)
-            .enumerate()
-            .map(|(k, w)| (k + lo, w))
-        {
+        for (k, w) in self.points[lo..=hi.max(lo + 1)].windows(2).enumerate().map(|(k, w)| (k + lo, w)) {
             let ab = w[1] - w[0];
             let len2 = ab.norm_squared();
-            let t = if len2 > 0.0 {
-                ((p - w[0]).dot(&ab) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
+            let t = if len2 > 0.0 { ((p - w[0]).dot(&ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
             let d = (w[0] + ab * t - p).norm();
             if d < best.0 {
                 best = (d, k, t);
@@ -373,24 +365,10 @@ fn from_path_tree(
     layout: &'static str,
     source: &Path,
 ) -> Result<Skeleton> {
-    let start = Node {
-        point: paths[0].points[0],
-        radius: paths[0].radii[0],
-        key: -1,
-    };
-    let mut walker = Walker {
-        paths,
-        arcs: paths.iter().map(Line::arcs).collect(),
-        nodes: vec![start],
-        edges: vec![],
-    };
+    let start = Node { point: paths[0].points[0], radius: paths[0].radii[0], key: -1 };
+    let mut walker = Walker { paths, arcs: paths.iter().map(Line::arcs).collect(), nodes: vec![start], edges: vec![] };
     walker.walk(tree, 0, keys, source)?;
-    Ok(Skeleton {
-        nodes: walker.nodes,
-        edges: walker.edges,
-        file_start: Some(0),
-        layout,
-    })
+    Ok(Skeleton { nodes: walker.nodes, edges: walker.edges, file_start: Some(0), layout })
 }
 
 struct Walker<'a> {
@@ -425,11 +403,7 @@ impl Walker<'_> {
                     }
                 }
                 let node = self.nodes.len();
-                self.nodes.push(Node {
-                    point: end,
-                    radius: path.radii[path.radii.len() - 1],
-                    key: keys[r],
-                });
+                self.nodes.push(Node { point: end, radius: path.radii[path.radii.len() - 1], key: keys[r] });
                 self.add_edge(r, from, from_arc, node, path.points.len() - 1, source)
             }
             PathTree::Split(children) => {
@@ -453,11 +427,7 @@ impl Walker<'_> {
                     from
                 } else {
                     let node = self.nodes.len();
-                    self.nodes.push(Node {
-                        point: path.points[k],
-                        radius: path.radii[k],
-                        key: i64::MAX,
-                    });
+                    self.nodes.push(Node { point: path.points[k], radius: path.radii[k], key: i64::MAX });
                     self.add_edge(r, from, from_arc, node, k, source)?;
                     node
                 };
@@ -494,34 +464,19 @@ impl Walker<'_> {
             ));
         }
         let eps = 1e-9 * (1.0 + arcs[arcs.len() - 1]);
-        let inner: Vec<usize> = (0..to_index)
-            .filter(|&i| arcs[i] > from_arc + eps && arcs[i] < arcs[to_index] - eps)
-            .collect();
+        let inner: Vec<usize> =
+            (0..to_index).filter(|&i| arcs[i] > from_arc + eps && arcs[i] < arcs[to_index] - eps).collect();
         let mut line = Line {
-            points: std::iter::once(a.point)
-                .chain(inner.iter().map(|&i| path.points[i]))
-                .chain([b.point])
-                .collect(),
-            radii: std::iter::once(a.radius)
-                .chain(inner.iter().map(|&i| path.radii[i]))
-                .chain([b.radius])
-                .collect(),
+            points: std::iter::once(a.point).chain(inner.iter().map(|&i| path.points[i])).chain([b.point]).collect(),
+            radii: std::iter::once(a.radius).chain(inner.iter().map(|&i| path.radii[i])).chain([b.radius]).collect(),
             normals: None,
         };
         if let Some(n) = &path.normals {
             let first = n[inner.first().map_or(to_index, |&i| i.saturating_sub(1))];
-            line.normals = Some(
-                std::iter::once(first)
-                    .chain(inner.iter().map(|&i| n[i]))
-                    .chain([n[to_index]])
-                    .collect(),
-            );
+            line.normals =
+                Some(std::iter::once(first).chain(inner.iter().map(|&i| n[i])).chain([n[to_index]]).collect());
         }
-        self.edges.push(Edge {
-            ends: [from, to],
-            line,
-            source: r,
-        });
+        self.edges.push(Edge { ends: [from, to], line, source: r });
         Ok(())
     }
 }
@@ -541,10 +496,7 @@ fn branch_split(lines: Vec<Line>, tags: &[IndexMap<String, i64>], source: &Path)
     let mut by_centerline: std::collections::BTreeMap<i64, Vec<(i64, usize)>> = Default::default();
     for k in 0..lines.len() {
         let cid = tag(k, "CenterlineIds").unwrap_or(0);
-        by_centerline
-            .entry(cid)
-            .or_default()
-            .push((tag(k, "TractIds").unwrap_or(k as i64), k));
+        by_centerline.entry(cid).or_default().push((tag(k, "TractIds").unwrap_or(k as i64), k));
     }
     let mut paths = vec![];
     let mut sequences = vec![];
@@ -646,10 +598,7 @@ fn group_tree(members: &[usize], seqs: &[Vec<i64>], depth: usize, ids: &[i64], s
     if parts.len() == 1 {
         return group_tree(&going, seqs, depth + 1, ids, source);
     }
-    let children = parts
-        .iter()
-        .map(|(_, p)| group_tree(p, seqs, depth + 1, ids, source))
-        .collect::<Result<_>>()?;
+    let children = parts.iter().map(|(_, p)| group_tree(p, seqs, depth + 1, ids, source)).collect::<Result<_>>()?;
     Ok(PathTree::Split(children))
 }
 
@@ -690,11 +639,7 @@ fn network(lines: Vec<Line>, source: &Path) -> Result<Skeleton> {
         let r = root(&cluster, e);
         if node_of[r] == usize::MAX {
             node_of[r] = nodes.len();
-            nodes.push(Node {
-                point: end_point(r),
-                radius: end_radius(r),
-                key: r as i64,
-            });
+            nodes.push(Node { point: end_point(r), radius: end_radius(r), key: r as i64 });
         }
         node_of[e] = node_of[r];
         let node = &mut nodes[node_of[r]];
@@ -746,11 +691,7 @@ fn network(lines: Vec<Line>, source: &Path) -> Result<Skeleton> {
             nodes[v].radius = r;
             // The branch that ends here takes the node's radius too.
             for other in edges.iter_mut().filter(|x| x.ends.contains(&v)) {
-                let at = if other.ends[0] == v {
-                    0
-                } else {
-                    other.line.radii.len() - 1
-                };
+                let at = if other.ends[0] == v { 0 } else { other.line.radii.len() - 1 };
                 other.line.radii[at] = r;
             }
             let host = &e.line;
@@ -775,16 +716,8 @@ fn network(lines: Vec<Line>, source: &Path) -> Result<Skeleton> {
                 }
                 l
             };
-            edges[i] = Edge {
-                ends: [e.ends[0], v],
-                line: piece(&head_idx, true),
-                source: e.source,
-            };
-            edges.push(Edge {
-                ends: [v, e.ends[1]],
-                line: piece(&tail_idx, false),
-                source: e.source,
-            });
+            edges[i] = Edge { ends: [e.ends[0], v], line: piece(&head_idx, true), source: e.source };
+            edges.push(Edge { ends: [v, e.ends[1]], line: piece(&tail_idx, false), source: e.source });
             degree[v] += 2;
         }
     }
@@ -805,12 +738,7 @@ fn network(lines: Vec<Line>, source: &Path) -> Result<Skeleton> {
         }
         joined[a.max(b)] = a.min(b);
     }
-    Ok(Skeleton {
-        nodes,
-        edges,
-        file_start: None,
-        layout: "polylines joined at their ends",
-    })
+    Ok(Skeleton { nodes, edges, file_start: None, layout: "polylines joined at their ends" })
 }
 
 fn root(parent: &[usize], mut x: usize) -> usize {
@@ -825,20 +753,14 @@ mod tests {
     use super::*;
 
     fn line(points: &[[f64; 3]], r: f64) -> Line {
-        Line {
-            points: points.iter().map(|p| Point3::from(*p)).collect(),
-            radii: vec![r; points.len()],
-            normals: None,
-        }
+        Line { points: points.iter().map(|p| Point3::from(*p)).collect(), radii: vec![r; points.len()], normals: None }
     }
 
     /// Points every `step` from a to b (both included).
     fn straight(a: [f64; 3], b: [f64; 3], step: f64) -> Vec<[f64; 3]> {
         let (a, b) = (Point3::from(a), Point3::from(b));
         let n = ((b - a).norm() / step).ceil() as usize;
-        (0..=n)
-            .map(|i| (a + (b - a) * (i as f64 / n as f64)).coords.into())
-            .collect()
+        (0..=n).map(|i| (a + (b - a) * (i as f64 / n as f64)).coords.into()).collect()
     }
 
     #[test]
@@ -849,11 +771,7 @@ mod tests {
         b.extend(straight([0.0, 0.0, 10.0], [-5.0, 0.0, 20.0], 0.1).into_iter().skip(1));
         let (a, b) = (line(&a, 1.0), line(&b, 1.0));
         let k = separation(&a, &b, 0).unwrap();
-        assert!(
-            (a.points[k] - Point3::new(0.0, 0.0, 10.0)).norm() < 0.15,
-            "{:?}",
-            a.points[k]
-        );
+        assert!((a.points[k] - Point3::new(0.0, 0.0, 10.0)).norm() < 0.15, "{:?}", a.points[k]);
         assert!(separation(&a, &a, 0).is_none());
     }
 

@@ -71,19 +71,14 @@ pub fn branch_split(tree: &CenterlineTree, source: &Path) -> Centerlines {
             push(branch.samples[head..=tail].iter().collect(), false, g);
             if let (Some(j), Some(&d)) = (branch.end_junction, chain.get(n + 1)) {
                 let daughter = &tree.branches[d];
-                let region: Vec<_> = branch.samples[tail..]
-                    .iter()
-                    .chain(daughter.samples[1..=cuts[d].0].iter())
-                    .collect();
+                let region: Vec<_> =
+                    branch.samples[tail..].iter().chain(daughter.samples[1..=cuts[d].0].iter()).collect();
                 let g = group(&mut group_of_junction[j]);
                 push(region, true, g);
             }
         }
     }
-    Centerlines {
-        polylines,
-        source: source.to_path_buf(),
-    }
+    Centerlines { polylines, source: source.to_path_buf() }
 }
 
 /// The sample range of a branch outside the maximal spheres of its junctions: at least one
@@ -95,20 +90,12 @@ fn own_part(tree: &CenterlineTree, branch: &Branch) -> (usize, usize) {
     let mut head = 0;
     if let Some(j) = branch.start_junction {
         let j = &tree.junctions[j];
-        head = s
-            .iter()
-            .position(|q| (q.point - j.centre).norm() >= j.radius)
-            .unwrap_or(n - 1)
-            .max(1);
+        head = s.iter().position(|q| (q.point - j.centre).norm() >= j.radius).unwrap_or(n - 1).max(1);
     }
     let mut tail = n - 1;
     if let Some(j) = branch.end_junction {
         let j = &tree.junctions[j];
-        tail = s
-            .iter()
-            .rposition(|q| (q.point - j.centre).norm() >= j.radius)
-            .unwrap_or(0)
-            .min(n - 2);
+        tail = s.iter().rposition(|q| (q.point - j.centre).norm() >= j.radius).unwrap_or(0).min(n - 2);
     }
     if tail <= head {
         // A branch shorter than its junctions' spheres: split it in the middle.

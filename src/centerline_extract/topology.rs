@@ -31,9 +31,7 @@ pub fn triangle_neighbours(triangles: &[[u32; 3]]) -> Vec<[u32; 3]> {
             out[group[0].2 as usize][group[0].3 as usize] = group[1].2;
             out[group[1].2 as usize][group[1].3 as usize] = group[0].2;
         } else if group.len() > 2 {
-            group
-                .iter()
-                .for_each(|e| out[e.2 as usize][e.3 as usize] = NON_MANIFOLD);
+            group.iter().for_each(|e| out[e.2 as usize][e.3 as usize] = NON_MANIFOLD);
         }
         i = j;
     }
@@ -105,10 +103,7 @@ pub fn boundary_loops(triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
             }
             chain.push(at);
             let from = edges.partition_point(|e| e.0 < at);
-            match (from..edges.len())
-                .take_while(|&e| edges[e].0 == at)
-                .find(|&e| !used[e])
-            {
+            match (from..edges.len()).take_while(|&e| edges[e].0 == at).find(|&e| !used[e]) {
                 Some(e) => {
                     used[e] = true;
                     at = edges[e].1;
@@ -135,11 +130,7 @@ pub fn loop_centre_and_area(vertices: &[Point3<f64>], lp: &[u32]) -> (Point3<f64
         sum += (a.coords + b.coords) * (0.5 * l);
         length += l;
     }
-    let centre = if length > 0.0 {
-        Point3::from(sum / length)
-    } else {
-        vertices[lp[0] as usize]
-    };
+    let centre = if length > 0.0 { Point3::from(sum / length) } else { vertices[lp[0] as usize] };
     let area = (0..n)
         .map(|i| (vertices[lp[i] as usize] - centre).cross(&(vertices[lp[(i + 1) % n] as usize] - centre)) * 0.5)
         .sum();
@@ -157,9 +148,7 @@ pub fn signed_volume6(vertices: &[Point3<f64>], triangles: &[[u32; 3]], loops: &
         let (c, _) = loop_centre_and_area(vertices, lp);
         let c = Point3::from(c.coords - shift);
         // The fan runs each boundary edge backwards, closing the surface consistently.
-        v += (0..lp.len())
-            .map(|i| det(&at(lp[(i + 1) % lp.len()]), &at(lp[i]), &c))
-            .sum::<f64>();
+        v += (0..lp.len()).map(|i| det(&at(lp[(i + 1) % lp.len()]), &at(lp[i]), &c)).sum::<f64>();
     }
     v
 }
@@ -172,10 +161,7 @@ pub fn vertex_normals(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<V
         let n = (b - a).cross(&(c - a));
         t.iter().for_each(|&i| normals[i as usize] += n);
     }
-    normals
-        .iter()
-        .map(|n| n.try_normalize(0.0).unwrap_or_default())
-        .collect()
+    normals.iter().map(|n| n.try_normalize(0.0).unwrap_or_default()).collect()
 }
 
 #[cfg(test)]

@@ -14,10 +14,7 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
     let keys: Vec<&String> = lines.first().map(|l| l.cell_tags.keys().collect()).unwrap_or_default();
     write_atomic(path, |w| {
         writeln!(w, r#"<?xml version="1.0"?>"#)?;
-        writeln!(
-            w,
-            r#"<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">"#
-        )?;
+        writeln!(w, r#"<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">"#)?;
         writeln!(w, "  <PolyData>")?;
         writeln!(
             w,
@@ -25,10 +22,7 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
             lines.len()
         )?;
         writeln!(w, r#"      <PointData Scalars="MaximumInscribedSphereRadius">"#)?;
-        writeln!(
-            w,
-            r#"        <DataArray type="Float64" Name="MaximumInscribedSphereRadius" format="ascii">"#
-        )?;
+        writeln!(w, r#"        <DataArray type="Float64" Name="MaximumInscribedSphereRadius" format="ascii">"#)?;
         for l in lines {
             for i in 0..l.points.len() {
                 let r = l.radii.as_ref().and_then(|r| r.get(i)).copied().unwrap_or(0.0);
@@ -48,10 +42,8 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
         }
         writeln!(w, "      </PointData>\n      <CellData>")?;
         for key in &keys {
-            let values: Vec<String> = lines
-                .iter()
-                .map(|l| l.cell_tags.get(*key).copied().unwrap_or(-1).to_string())
-                .collect();
+            let values: Vec<String> =
+                lines.iter().map(|l| l.cell_tags.get(*key).copied().unwrap_or(-1).to_string()).collect();
             writeln!(
                 w,
                 r#"        <DataArray type="Int64" Name="{key}" format="ascii">{}</DataArray>"#,
@@ -59,18 +51,12 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
             )?;
         }
         writeln!(w, "      </CellData>\n      <Points>")?;
-        writeln!(
-            w,
-            r#"        <DataArray type="Float64" Name="Points" NumberOfComponents="3" format="ascii">"#
-        )?;
+        writeln!(w, r#"        <DataArray type="Float64" Name="Points" NumberOfComponents="3" format="ascii">"#)?;
         for p in lines.iter().flat_map(|l| &l.points) {
             writeln!(w, "          {:e} {:e} {:e}", p.x * scale, p.y * scale, p.z * scale)?;
         }
         writeln!(w, "        </DataArray>\n      </Points>\n      <Lines>")?;
-        writeln!(
-            w,
-            r#"        <DataArray type="Int64" Name="connectivity" format="ascii">"#
-        )?;
+        writeln!(w, r#"        <DataArray type="Int64" Name="connectivity" format="ascii">"#)?;
         let mut offset = 0;
         let mut offsets = vec![];
         for l in lines {
@@ -98,10 +84,7 @@ pub fn write_branch_split(
     path: &Path,
 ) -> Result<crate::centerline::CenterlineTree> {
     let start = extraction.centerlines.polylines.first().map(|l| l.points[0]);
-    let config = crate::config::CenterlineConfig {
-        inlet_mm: start.map(|p| p.coords.into()),
-        ..Default::default()
-    };
+    let config = crate::config::CenterlineConfig { inlet_mm: start.map(|p| p.coords.into()), ..Default::default() };
     let tree = crate::centerline::CenterlineTree::build(&extraction.centerlines, &config, None)?;
     write_vtp(&super::branch_split(&tree, path), scale, path)?;
     Ok(tree)
