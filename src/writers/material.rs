@@ -62,9 +62,9 @@ impl LayerMaterial {
     /// hold 100 mmHg (ccx 2.20 stops with "fiber extension is too large"). Measured with ccx at
     /// 100 mmHg on coarse meshes: times 10 (the default of earlier versions) opens a straight
     /// tube by 47 % of its radius, and junctions, where the wall is less curved, balloon until
-    /// ccx gives up (vmtk_aortoiliac at 17 % of the pressure); c times 30 and k1 times 100 open
+    /// ccx gives up (vmtk_aortoiliac at 26 % of the pressure); c times 30 and k1 times 100 open
     /// the tube by 9 % and still leave simvascular_demo_aortoiliac's increments cut back past
-    /// 85 %; times 100 opens it by 6 % and every branched vessel solves. Override for your tissue.
+    /// 86 %; times 100 opens it by 6 % and every branched vessel solves. Override for your tissue.
     ///
     /// K = 100 mu (initial Poisson ratio 0.495; CalculiX has no hybrid elements, so the
     /// compressibility must stay finite); kappa = 0 (HGO 2000 has no dispersion, and CalculiX's
