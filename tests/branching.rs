@@ -314,12 +314,7 @@ fn real_branched_vessels_mesh_within_the_bars() {
     // both junctions' crotches meet. The carotid's file places its junction
     // at the wall of the external carotid's ostium: it meshes because the junction moves to
     // the middle of the bulb (centerline::junction_centre).
-    let cases: [(&str, &str, &str, LengthUnit); 3] = [
-        ("vmtk_aortoiliac", "aorta-surface-open-ends.stl", "aorta-centerline.vtp", LengthUnit::Mm),
-        ("simvascular_demo_aortoiliac", "demo.vtp", "demo-centerlines.vtp", LengthUnit::Cm),
-        ("gmsh_carotid_bifurcation", "carotid.stl", "centerlinesCAROTID.vtk", LengthUnit::M),
-    ];
-    for (case, surface, centerlines, unit) in cases {
+    for (case, surface, centerlines, unit) in common::REAL_BIFURCATIONS {
         for preset in [Preset::Coarse, Preset::Medium] {
             let d = v.join(case);
             let m = mesh(&d.join(surface), &d.join(centerlines), unit, &MeshConfig::preset(preset));

@@ -9,7 +9,6 @@ use std::process::Command;
 use vesselhex::config::MeshConfig;
 use vesselhex::mesh::{sets, VesselMesh};
 use vesselhex::testing::straight_tube_mesh;
-use vesselhex::units::LengthUnit;
 use vesselhex::writers::inp::{ElementType, MaterialModel, MMHG_IN_MPA};
 use vesselhex::writers::{calculix::write_calculix, WriteOptions};
 
@@ -499,12 +498,7 @@ fn real_branched_vessels_decks_solve() {
         return;
     }
     let Some(v) = common::vessels_dir() else { return };
-    let cases = [
-        ("vmtk_aortoiliac", "aorta-surface-open-ends.stl", "aorta-centerline.vtp", LengthUnit::Mm),
-        ("simvascular_demo_aortoiliac", "demo.vtp", "demo-centerlines.vtp", LengthUnit::Cm),
-        ("gmsh_carotid_bifurcation", "carotid.stl", "centerlinesCAROTID.vtk", LengthUnit::M),
-    ];
-    for (case, surface, centerlines, unit) in cases {
+    for (case, surface, centerlines, unit) in common::REAL_BIFURCATIONS {
         let d = v.join(case);
         let mesh = common::mesh_files_in(
             &d.join(surface),

@@ -224,6 +224,14 @@ pub fn mesh_files_in(surface: &Path, centerlines: &Path, unit: LengthUnit, confi
         .mesh
 }
 
+/// The real bifurcations that mesh with their own centerlines (folder, surface, centerlines,
+/// unit of both files), as issue 7 names them; gmsh_aortic_arch does not mesh yet.
+pub const REAL_BIFURCATIONS: [(&str, &str, &str, LengthUnit); 3] = [
+    ("vmtk_aortoiliac", "aorta-surface-open-ends.stl", "aorta-centerline.vtp", LengthUnit::Mm),
+    ("simvascular_demo_aortoiliac", "demo.vtp", "demo-centerlines.vtp", LengthUnit::Cm),
+    ("gmsh_carotid_bifurcation", "carotid.stl", "centerlinesCAROTID.vtk", LengthUnit::M),
+];
+
 /// The real unbranched vessels meshed with `config`: aneurisk_C0092 with its centerline and
 /// vmtk_abdominal_aorta_segment with a derived one.
 pub fn real_unbranched_meshes(vessels: &Path, config: &MeshConfig) -> Vec<(&'static str, VesselMesh)> {
