@@ -330,6 +330,76 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
     Ok(geometry)
 }
 
+/// Checks that the junctions at the two ends of every branch leave it a length of its own on
+/// every side. A page's rim is the crotch between its two branches; when the crotch beside a
+/// branch lies further along the branch than the junction at its other end, another branch
+/// leaves from that crotch, the branch has no wall of its own on that side, and the two
+/// junctions' block patterns would have to overlap there (their hexes invert; finer meshes or a
+/// thinner wall do not help). Measured on the aortic arch (BRANCHING.md §3): its
+/// brachiocephalic-carotid trunk, whose arch-side crotch lies 1.22 times as far along it as the
+/// junction where it divides. Refusing here names the cause before any ray is cast.
+pub fn check_junction_spacing(
+    tree: &CenterlineTree,
+    junctions: &[JunctionGeometry],
+    surface: &LumenSurface,
+) -> Result<()> {
+    for (b, branch) in tree.branches.iter().enumerate() {
+        let (Some(ja), Some(jb)) = (branch.start_junction, branch.end_junction) else { continue };
+        for (here, there) in [(&junctions[ja], &junctions[jb]), (&junctions[jb], &junctions[ja])] {
+            let chord = there.centre - here.centre;
+            let apart = chord.norm();
+            let slot = here.slot_of(b);
+            let (right, left) = here.side_pages(slot);
+            for page in [right, left] {
+                let p = &here.pages[page];
+                let along = (p.dir * p.depth).dot(&chord) / apart;
+                if along <= apart {
+                    continue;
+                }
+                let k = here.slots.len();
+                let name = |s: usize| tree.branches[here.slots[s % k].branch].name.as_str();
+                let others: Vec<usize> = there.slots.iter().map(|s| s.branch).filter(|&o| o != b).collect();
+                let names: Vec<&str> = others.iter().map(|&o| tree.branches[o].name.as_str()).collect();
+                // The branch leaving from the crotch: the one whose tube passes nearest to it.
+                let crotch = here.centre + p.dir * p.depth;
+                let gap = |o: usize| {
+                    tree.branches[o]
+                        .samples
+                        .iter()
+                        .map(|s| (s.point - crotch).norm() - s.radius)
+                        .fold(f64::INFINITY, f64::min)
+                };
+                let culprit = &tree.branches[*others
+                    .iter()
+                    .min_by(|&&x, &&y| gap(x).total_cmp(&gap(y)))
+                    .expect("a junction has other branches")];
+                let outlet = culprit.samples.last().expect("branches have samples").point;
+                return Err(Error::Geometry(format!(
+                    "{}: {} and {} overlap: the crotch between {} and {} lies {:.1} mm from the first junction's \
+                     centre along {}, past the second junction ({:.1} mm away, where {} meet). {} has no length \
+                     of its own on that side: {} (ending at {}) leaves from that crotch. vesselhex cannot mesh \
+                     this pattern yet (it needs pages of unequal depth, BRANCHING.md §4.3); with {} clipped \
+                     from the surface and the centerlines, the two junctions no longer meet",
+                    surface.source.display(),
+                    here.describe(tree),
+                    there.describe(tree),
+                    name(page),
+                    name(page + 1),
+                    along,
+                    branch.name,
+                    apart,
+                    names.join(", "),
+                    branch.name,
+                    culprit.name,
+                    describe_point(&outlet),
+                    culprit.name,
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Quarter turns of the template as index maps on the core grid: turning by 90 degrees
 /// counter-clockwise sends (x, y) to (-y, x).
 pub fn turn_core_index(n: usize, q: u8, i: usize, j: usize) -> (usize, usize) {

@@ -9,7 +9,9 @@ use crate::centerline::CenterlineTree;
 use crate::config::MeshConfig;
 use crate::error::{Error, Result};
 use crate::input::{read_centerlines, read_surface, Centerlines, TriangleSurface};
-use crate::junction::{analyse_junctions, fold_normal, signed_angle, twist_frames, FoldEnd, JunctionGeometry};
+use crate::junction::{
+    analyse_junctions, check_junction_spacing, fold_normal, signed_angle, twist_frames, FoldEnd, JunctionGeometry,
+};
 use crate::mesh::VesselMesh;
 use crate::progress::Progress;
 use crate::projection::{clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
@@ -236,6 +238,7 @@ pub fn mesh_tree(
     let l = &config.lumen;
     let template = SectionTemplate::new(l.core_elements, l.core_size, l.ray_reach);
     let junctions = analyse_junctions(&tree, lumen_surface)?;
+    check_junction_spacing(&tree, &junctions, lumen_surface)?;
     if !junctions.is_empty() && l.core_elements % 2 != 0 {
         return Err(Error::Config(format!(
             "lumen.core_elements = {} is odd: a branching vessel needs an even number (the junction's spine runs \
