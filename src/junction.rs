@@ -128,6 +128,36 @@ impl JunctionGeometry {
         self.centre + self.axis * (p.y * along) + page.dir * (p.x.abs() * page.depth)
     }
 
+    /// Why a transition of this junction folds, measured, for the message that refuses an
+    /// inverted hex in it: the branch's radius against the junction's and the angle to its
+    /// nearest neighbour about the spine. Every branch's folded end spans the whole spine, so a
+    /// small or acute branch funnels into it; on the synthetic sweep (tests/branching.rs) finer
+    /// meshes and thinner walls did not remove such folds.
+    pub fn fold_cause(&self, tree: &CenterlineTree, branch: usize) -> String {
+        let k = self.slots.len();
+        let slot = self.slot_of(branch);
+        let me = &self.slots[slot];
+        let nearest = [(slot + 1) % k, (slot + k - 1) % k]
+            .iter()
+            .map(|&o| {
+                let d = (self.slots[o].angle - me.angle).rem_euclid(TAU);
+                d.min(TAU - d)
+            })
+            .fold(f64::INFINITY, f64::min);
+        format!(
+            "the transition of {} folds there: its radius is {:.2} mm, 1/{:.1} of the junction's {:.2} mm, and it \
+             leaves {:.0} degrees from its nearest neighbour about the spine. Every branch's folded end spans the \
+             junction's whole spine, so a small or acute branch funnels into it; vesselhex does not yet give small \
+             side branches thin pages of their own (BRANCHING.md §4.3), and a finer mesh or a thinner wall seldom \
+             removes such a fold",
+            tree.branches[branch].name,
+            me.radius,
+            self.radius / me.radius,
+            self.radius,
+            nearest.to_degrees()
+        )
+    }
+
     /// Unit normal of a page, pointing to the side of the given slot.
     fn page_normal_towards(&self, page: usize, slot: usize) -> Vector3<f64> {
         let n = self.axis.cross(&self.pages[page].dir);

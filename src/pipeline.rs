@@ -291,13 +291,13 @@ pub fn mesh_tree(
         let (place, cause) = match junction_of[e] {
             Some(j) => (
                 format!(", in {},", junctions[j].describe(&tree)),
-                "the junction's transition folds there (a narrow crotch or a small branch on a large vessel); \
-                 reduce wall.thickness_ratio or mesh finer",
+                junctions[j].fold_cause(&tree, mesh.branch_of[e] as usize),
             ),
             None => (
                 String::new(),
                 "the vessel bends too sharply for the cross-sections, or the wall is too thick there. Increase \
-                 centerline.smoothing_passes, reduce wall.thickness_ratio or lumen.axial_spacing",
+                 centerline.smoothing_passes, reduce wall.thickness_ratio or lumen.axial_spacing"
+                    .to_string(),
             ),
         };
         return Err(Error::Geometry(format!(

@@ -234,6 +234,13 @@ fn synthetic_junction_sweep() {
                 // A refusal must say where and why, never produce a broken mesh.
                 let msg = e.to_string();
                 assert!(msg.contains("junction at ("), "{label}: a refusal must name the junction: {msg}");
+                if msg.contains("is inverted") {
+                    // ... and the measured cause: which branch folds, its size against the junction's.
+                    assert!(
+                        msg.contains("the transition of branch_") && msg.contains("of the junction's"),
+                        "{label}: an inverted junction hex must be blamed on a branch, measured: {msg}"
+                    );
+                }
                 table.push(format!("{label}: refused: {msg}"));
                 failures.push(label);
             }
