@@ -59,6 +59,9 @@ pub struct JunctionReport {
     /// Branches counter-clockwise about the spine, the parent first among them.
     pub branches: Vec<String>,
     pub spine_axis: [f64; 3],
+    /// How the wall grew from the junction's lumen-surface nodes: `normal` or `ray` (the
+    /// better of the two, see README).
+    pub wall_growth: crate::config::WallGrowth,
     pub elements: usize,
     pub scaled_jacobian: Stats,
     pub lumen_equiangle_skew: Stats,

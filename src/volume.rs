@@ -75,6 +75,7 @@ pub fn build_volume(
     layers: &[WallLayer],
     wall_thickness: &dyn Fn(f64) -> f64,
     wall_growth: WallGrowth,
+    rays_in_junctions: bool,
     branch_names: Vec<String>,
     surface: &LumenSurface,
 ) -> (VesselMesh, Vec<Option<usize>>) {
@@ -186,7 +187,18 @@ pub fn build_volume(
     let graph = SurfaceGraph::new(&quads, nodes.len());
     let dirs: Vec<Vector3<f64>> = match wall_growth {
         WallGrowth::Ray => graph.nodes.iter().map(|&s| node_ray[s as usize]).collect(),
-        WallGrowth::Normal => surface_normals(&nodes, &quads, &graph, &node_ray, &end_tangent, &junction_node),
+        WallGrowth::Normal => {
+            let in_junction = junction_node.iter().map(|&j| j && rays_in_junctions).collect::<Vec<_>>();
+            let mut dirs = surface_normals(&nodes, &quads, &graph, &node_ray, &end_tangent, &junction_node);
+            // Along the rays in junction transitions, where asked: the caller keeps whichever
+            // wall is better (see `build_volume`'s caller).
+            for (d, &s) in dirs.iter_mut().zip(&graph.nodes) {
+                if in_junction[s as usize] && !end_tangent.contains_key(&s) {
+                    *d = node_ray[s as usize].normalize();
+                }
+            }
+            dirs
+        }
     };
     let surface_nodes = &graph.nodes;
     let nominal: Vec<f64> = surface_nodes.iter().map(|&s| wall_thickness(node_radius[s as usize])).collect();
