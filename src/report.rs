@@ -62,6 +62,9 @@ pub struct JunctionReport {
     /// How the wall grew from the junction's lumen-surface nodes: `normal` or `ray` (the
     /// better of the two, see README).
     pub wall_growth: crate::config::WallGrowth,
+    /// Whether the transitions' lumen-surface nodes were slid on the triangles to raise the
+    /// worst element (see README).
+    pub surface_nodes_slid: bool,
     pub elements: usize,
     pub scaled_jacobian: Stats,
     pub lumen_equiangle_skew: Stats,

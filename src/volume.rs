@@ -75,7 +75,7 @@ pub fn build_volume(
     layers: &[WallLayer],
     wall_thickness: &dyn Fn(f64) -> f64,
     wall_growth: WallGrowth,
-    rays_in_junctions: bool,
+    variant: JunctionVariant,
     branch_names: Vec<String>,
     surface: &LumenSurface,
 ) -> (VesselMesh, Vec<Option<usize>>) {
@@ -93,8 +93,8 @@ pub fn build_volume(
     // Nodes of junction sections, whose wall directions get extra smoothing.
     let mut junction_node: Vec<bool> = Vec::new();
     let mut node_ray: Vec<Vector3<f64>> = Vec::new();
-    // Inner lumen nodes of junction transitions, which the optimisation may move.
-    let mut movable: Vec<bool> = Vec::new();
+    // How each node may move in the junction optimisation.
+    let mut movable: Vec<Mobility> = Vec::new();
     let mut branch_nodes: Vec<BranchNodes> = Vec::with_capacity(projected.len());
     for pb in projected {
         let last = pb.sections.len() - 1;
@@ -107,36 +107,49 @@ pub fn build_volume(
             };
             let mut ids = Vec::with_capacity(core_count + r_cells * m);
             let inner_movable = sec.in_junction && fold.is_none();
+            // A vessel end's section stays as it is (its nodes are the end's sets and plane).
+            let vessel_end = (i == 0 && !matches!(pb.start, BranchEnd::Fold(_)))
+                || (i == last && !matches!(pb.end, BranchEnd::Fold(_)));
+            // Folded sections' surface nodes (page rims) stay: the pages stay flat.
+            let surface_movable = variant.slide_surface_nodes && sec.in_junction && fold.is_none() && !vessel_end;
             let in_junction = sec.in_junction;
-            let mut add = |key: Option<FoldKey>, p: Point3<f64>, radius: f64, ray: Vector3<f64>, free: bool| -> u32 {
-                if let Some(key) = key {
-                    if let Some(&id) = pool.get(&key) {
-                        return id;
+            let mut add =
+                |key: Option<FoldKey>, p: Point3<f64>, radius: f64, ray: Vector3<f64>, free: Mobility| -> u32 {
+                    if let Some(key) = key {
+                        if let Some(&id) = pool.get(&key) {
+                            return id;
+                        }
                     }
-                }
-                let id = nodes.len() as u32;
-                nodes.push(p);
-                node_radius.push(radius);
-                junction_node.push(in_junction);
-                node_ray.push(ray);
-                movable.push(free);
-                if let Some(key) = key {
-                    pool.insert(key, id);
-                }
-                id
-            };
+                    let id = nodes.len() as u32;
+                    nodes.push(p);
+                    node_radius.push(radius);
+                    junction_node.push(in_junction);
+                    node_ray.push(ray);
+                    movable.push(free);
+                    if let Some(key) = key {
+                        pool.insert(key, id);
+                    }
+                    id
+                };
             let key = |c: usize, level: usize| {
                 fold.map(|f| FoldKey::new(&junctions[f.junction], &f, n, c % (n + 1), c / (n + 1), level))
             };
             for (c, p) in sec.core.iter().enumerate() {
-                ids.push(add(key(c, 0), *p, sec.station.radius, Vector3::zeros(), inner_movable));
+                let free = if inner_movable { Mobility::Inner } else { Mobility::Fixed };
+                ids.push(add(key(c, 0), *p, sec.station.radius, Vector3::zeros(), free));
             }
             for (level, &rho) in levels.lumen.iter().enumerate().skip(1) {
                 for k in 0..m {
                     let (a, b) = (sec.origins[k], sec.surface[k]);
                     // The surface level is the hit point itself, bit for bit.
                     let p = if rho == 1.0 { b } else { a + (b - a) * rho };
-                    let free = inner_movable && level < r_cells;
+                    let free = if inner_movable && level < r_cells {
+                        Mobility::Inner
+                    } else if surface_movable && level == r_cells {
+                        Mobility::OnSurface
+                    } else {
+                        Mobility::Fixed
+                    };
                     ids.push(add(key(template.ring_core_index[k], level), p, sec.station.radius, sec.dirs[k], free));
                 }
             }
@@ -185,24 +198,30 @@ pub fn build_volume(
     }
     // Wall nodes: W levels above every lumen-surface node, in surface-node order.
     let graph = SurfaceGraph::new(&quads, nodes.len());
-    let dirs: Vec<Vector3<f64>> = match wall_growth {
-        WallGrowth::Ray => graph.nodes.iter().map(|&s| node_ray[s as usize]).collect(),
-        WallGrowth::Normal => {
-            let in_junction = junction_node.iter().map(|&j| j && rays_in_junctions).collect::<Vec<_>>();
-            let mut dirs = surface_normals(&nodes, &quads, &graph, &node_ray, &end_tangent, &junction_node);
-            // Along the rays in junction transitions, where asked: the caller keeps whichever
-            // wall is better (see `build_volume`'s caller).
-            for (d, &s) in dirs.iter_mut().zip(&graph.nodes) {
-                if in_junction[s as usize] && !end_tangent.contains_key(&s) {
-                    *d = node_ray[s as usize].normalize();
-                }
-            }
-            dirs
-        }
-    };
     let surface_nodes = &graph.nodes;
     let nominal: Vec<f64> = surface_nodes.iter().map(|&s| wall_thickness(node_radius[s as usize])).collect();
-    let thickness = crotch_limited_thickness(&nodes, &graph, &dirs, surface, &nominal, !junctions.is_empty());
+    // Growth direction and thickness at every surface node, from the surface as it stands.
+    let growth = |nodes: &[Point3<f64>]| -> (Vec<Vector3<f64>>, Vec<f64>) {
+        let dirs: Vec<Vector3<f64>> = match wall_growth {
+            WallGrowth::Ray => graph.nodes.iter().map(|&s| node_ray[s as usize]).collect(),
+            WallGrowth::Normal => {
+                let mut dirs = surface_normals(nodes, &quads, &graph, &node_ray, &end_tangent, &junction_node);
+                // Along the rays in junction transitions, where asked: the caller keeps whichever
+                // wall is better (see `build_volume`'s caller).
+                if variant.wall_along_rays {
+                    for (d, &s) in dirs.iter_mut().zip(&graph.nodes) {
+                        if junction_node[s as usize] && !end_tangent.contains_key(&s) {
+                            *d = node_ray[s as usize].normalize();
+                        }
+                    }
+                }
+                dirs
+            }
+        };
+        let thickness = crotch_limited_thickness(nodes, &graph, &dirs, surface, &nominal, !junctions.is_empty());
+        (dirs, thickness)
+    };
+    let (dirs, thickness) = growth(&nodes);
     let mut wall_base = vec![u32::MAX; nodes.len()];
     for ((&s, dir), thickness) in surface_nodes.iter().zip(&dirs).zip(thickness) {
         let p = nodes[s as usize];
@@ -312,7 +331,17 @@ pub fn build_volume(
         }
     }
     regions.resize(hexes.len(), Region::Lumen);
-    improve_junction_nodes(&mut nodes, &hexes, &movable);
+    improve_junction_nodes(&mut nodes, &hexes, &movable, surface);
+    if movable.contains(&Mobility::OnSurface) {
+        // The wall was laid out on the surface before its nodes slid: grow it again from there.
+        let (dirs, thickness) = growth(&nodes);
+        for ((&s, dir), t) in surface_nodes.iter().zip(&dirs).zip(&thickness) {
+            let p = nodes[s as usize];
+            for (w, &tau) in levels.wall[1..].iter().enumerate() {
+                nodes[wall_base[s as usize] as usize + w] = p + dir * (t * tau);
+            }
+        }
+    }
     for region in Region::WALL {
         for (b, pb) in projected.iter().enumerate() {
             let last = pb.sections.len() - 2;
@@ -399,14 +428,37 @@ pub fn build_volume(
 /// Sweeps of the junction node optimisation.
 const OPTIMISATION_SWEEPS: usize = 10;
 
-/// Raises the worst scaled Jacobian around the inner lumen nodes of junction transitions
-/// (BRANCHING.md §4.4): each node in turn moves towards the centroid of its edge neighbours,
-/// by the largest of a few step fractions that improves the worst element around it. Surface
-/// and page nodes never move, so the mesh stays on the surface and conformal. Sequential, so
-/// the result does not depend on the thread count. Runs before the wall exists: only lumen
-/// elements can hold a movable node.
-fn improve_junction_nodes(nodes: &mut [Point3<f64>], lumen: &[Hex], movable: &[bool]) {
-    let free: Vec<u32> = (0..movable.len() as u32).filter(|&i| movable[i as usize]).collect();
+/// How a branched vessel's junctions are finished; the caller builds the variants and keeps
+/// the best (see `pipeline::mesh_tree`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct JunctionVariant {
+    /// The wall grows from junction nodes along their rays instead of the smoothed normal.
+    pub wall_along_rays: bool,
+    /// The optimisation also slides the lumen-surface nodes of transitions on the triangles.
+    pub slide_surface_nodes: bool,
+}
+
+/// Which junction nodes the optimisation may move, and how.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mobility {
+    Fixed,
+    /// An inner lumen node of a transition section: moves freely.
+    Inner,
+    /// A lumen-surface node of a transition section (neither folded nor a vessel end's):
+    /// slides on the triangles.
+    OnSurface,
+}
+
+/// Raises the worst scaled Jacobian around the movable lumen nodes of junction transitions
+/// (BRANCHING.md §4.4): each node in turn moves towards the centroid of its edge neighbours
+/// (a surface node: of its neighbours along the surface, then onto the nearest point of the
+/// triangles, so it stays on the surface to rounding), by the largest of a few step fractions
+/// that improves the worst lumen element around it. Fold (page) nodes never move, so the
+/// junction stays conformal and its pages flat. Sequential, so the result does not depend on
+/// the thread count. Only lumen elements count: `build_volume` grows the wall again from the
+/// surface once its nodes have slid.
+fn improve_junction_nodes(nodes: &mut [Point3<f64>], lumen: &[Hex], movable: &[Mobility], surface: &LumenSurface) {
+    let free: Vec<u32> = (0..movable.len() as u32).filter(|&i| movable[i as usize] != Mobility::Fixed).collect();
     if free.is_empty() {
         return;
     }
@@ -414,7 +466,7 @@ fn improve_junction_nodes(nodes: &mut [Point3<f64>], lumen: &[Hex], movable: &[b
     let mut neighbours: HashMap<u32, Vec<u32>> = HashMap::new();
     for (e, h) in lumen.iter().enumerate() {
         for (c, &n) in h.iter().enumerate() {
-            if movable[n as usize] {
+            if movable[n as usize] != Mobility::Fixed {
                 incident.entry(n).or_default().push(e);
                 let nb = neighbours.entry(n).or_default();
                 for &[a, b] in HEX_EDGES.iter() {
@@ -431,6 +483,25 @@ fn improve_junction_nodes(nodes: &mut [Point3<f64>], lumen: &[Hex], movable: &[b
         nb.sort_unstable();
         nb.dedup();
     }
+    // A surface node's neighbours along the surface: the other corners of its outer faces
+    // that share an edge with it.
+    let on_outer_face: HashMap<u32, Vec<u32>> = free
+        .iter()
+        .filter(|&&n| movable[n as usize] == Mobility::OnSurface)
+        .map(|&n| {
+            let mut nb: Vec<u32> = Vec::new();
+            for &e in &incident[&n] {
+                let outer = crate::mesh::face_nodes(&lumen[e], crate::mesh::FACE_OUTER);
+                if let Some(at) = outer.iter().position(|&x| x == n) {
+                    nb.push(outer[(at + 1) % 4]);
+                    nb.push(outer[(at + 3) % 4]);
+                }
+            }
+            nb.sort_unstable();
+            nb.dedup();
+            (n, nb)
+        })
+        .collect();
     let worst = |nodes: &[Point3<f64>], elements: &[usize]| -> f64 {
         elements
             .iter()
@@ -440,12 +511,17 @@ fn improve_junction_nodes(nodes: &mut [Point3<f64>], lumen: &[Hex], movable: &[b
     for _ in 0..OPTIMISATION_SWEEPS {
         for &n in &free {
             let elements = &incident[&n];
-            let nb = &neighbours[&n];
+            let on_surface = movable[n as usize] == Mobility::OnSurface;
+            let nb = if on_surface { &on_outer_face[&n] } else { &neighbours[&n] };
+            if nb.is_empty() {
+                continue;
+            }
             let centroid = nb.iter().fold(Vector3::zeros(), |acc, &j| acc + nodes[j as usize].coords) / nb.len() as f64;
             let old = nodes[n as usize];
             let before = worst(nodes, elements);
             for step in [1.0, 0.5, 0.25] {
-                nodes[n as usize] = old + (Point3::from(centroid) - old) * step;
+                let p = old + (Point3::from(centroid) - old) * step;
+                nodes[n as usize] = if on_surface { surface.closest(&p).point } else { p };
                 if worst(nodes, elements) > before + 1e-9 {
                     break;
                 }

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{files_under, fixture, mesh_cli, path_str, temp_dir, vesselhex};
+use common::{crate_dir, files_under, fixture, mesh_cli, path_str, temp_dir, vesselhex};
 use std::path::Path;
 
 #[test]
@@ -61,15 +61,20 @@ fn output_units_scale_the_vtu_but_not_the_figures() {
 
 #[test]
 fn two_runs_are_byte_identical_whatever_the_thread_count() {
-    let (stl, csv) = fixture("helical");
-    let a = temp_dir("det-a");
-    let b = temp_dir("det-b");
-    mesh_cli(&stl, &csv, &a, &["--reproducible", "--threads", "1"]);
-    mesh_cli(&stl, &csv, &b, &["--reproducible", "--threads", "2"]);
-    for f in ["mesh.vtu", "report.json"] {
-        let x = std::fs::read(a.join(f)).unwrap();
-        let y = std::fs::read(b.join(f)).unwrap();
-        assert!(x == y, "{f} differs between runs");
+    // A branched vessel too: its junction is finished in several ways built side by side, and
+    // the choice between them must not depend on the threads.
+    let dir = crate_dir().join("fixtures");
+    let branched = (dir.join("t_junction.stl"), dir.join("t_junction_centerlines.vtp"));
+    for (name, (stl, centerlines)) in [("helical", fixture("helical")), ("t_junction", branched)] {
+        let a = temp_dir(&format!("det-a-{name}"));
+        let b = temp_dir(&format!("det-b-{name}"));
+        mesh_cli(&stl, &centerlines, &a, &["--reproducible", "--threads", "1"]);
+        mesh_cli(&stl, &centerlines, &b, &["--reproducible", "--threads", "2"]);
+        for f in ["mesh.vtu", "report.json"] {
+            let x = std::fs::read(a.join(f)).unwrap();
+            let y = std::fs::read(b.join(f)).unwrap();
+            assert!(x == y, "{name}: {f} differs between runs");
+        }
     }
 }
 
