@@ -65,6 +65,9 @@ pub struct JunctionReport {
     /// Whether the transitions' lumen-surface nodes were slid on the triangles to raise the
     /// worst element (see README).
     pub surface_nodes_slid: bool,
+    /// Whether the optimisation also ran its pattern search (tried when the worst junction
+    /// element is below 0.3).
+    pub pattern_search: bool,
     pub elements: usize,
     pub scaled_jacobian: Stats,
     pub lumen_equiangle_skew: Stats,

@@ -331,7 +331,7 @@ pub fn build_volume(
         }
     }
     regions.resize(hexes.len(), Region::Lumen);
-    improve_junction_nodes(&mut nodes, &hexes, &movable, surface);
+    improve_junction_nodes(&mut nodes, &hexes, &movable, surface, variant.pattern_search);
     if movable.contains(&Mobility::OnSurface) {
         // The wall was laid out on the surface before its nodes slid: grow it again from there.
         let (dirs, thickness) = growth(&nodes);
@@ -436,6 +436,9 @@ pub struct JunctionVariant {
     pub wall_along_rays: bool,
     /// The optimisation also slides the lumen-surface nodes of transitions on the triangles.
     pub slide_surface_nodes: bool,
+    /// Where a move towards the centroid does not help a node, the optimisation probes small
+    /// moves along the axes.
+    pub pattern_search: bool,
 }
 
 /// Which junction nodes the optimisation may move, and how.
@@ -453,11 +456,18 @@ enum Mobility {
 /// (BRANCHING.md §4.4): each node in turn moves towards the centroid of its edge neighbours
 /// (a surface node: of its neighbours along the surface, then onto the nearest point of the
 /// triangles, so it stays on the surface to rounding), by the largest of a few step fractions
-/// that improves the worst lumen element around it. Fold (page) nodes never move, so the
+/// that improves the worst lumen element around it, or else (`pattern_search`) by the best of
+/// small moves along the axes. Fold (page) nodes never move, so the
 /// junction stays conformal and its pages flat. Sequential, so the result does not depend on
 /// the thread count. Only lumen elements count: `build_volume` grows the wall again from the
 /// surface once its nodes have slid.
-fn improve_junction_nodes(nodes: &mut [Point3<f64>], lumen: &[Hex], movable: &[Mobility], surface: &LumenSurface) {
+fn improve_junction_nodes(
+    nodes: &mut [Point3<f64>],
+    lumen: &[Hex],
+    movable: &[Mobility],
+    surface: &LumenSurface,
+    pattern_search: bool,
+) {
     let free: Vec<u32> = (0..movable.len() as u32).filter(|&i| movable[i as usize] != Mobility::Fixed).collect();
     if free.is_empty() {
         return;
@@ -519,13 +529,32 @@ fn improve_junction_nodes(nodes: &mut [Point3<f64>], lumen: &[Hex], movable: &[M
             let centroid = nb.iter().fold(Vector3::zeros(), |acc, &j| acc + nodes[j as usize].coords) / nb.len() as f64;
             let old = nodes[n as usize];
             let before = worst(nodes, elements);
+            let mut moved = false;
             for step in [1.0, 0.5, 0.25] {
                 let p = old + (Point3::from(centroid) - old) * step;
                 nodes[n as usize] = if on_surface { surface.closest(&p).point } else { p };
                 if worst(nodes, elements) > before + 1e-9 {
+                    moved = true;
                     break;
                 }
                 nodes[n as usize] = old;
+            }
+            if !moved && pattern_search {
+                // The centroid did not help: probe small moves along the axes (a pattern
+                // search), a fifth and a twentieth of the shortest edge, and keep the best.
+                let h = nb.iter().map(|&j| (nodes[j as usize] - old).norm()).fold(f64::INFINITY, f64::min);
+                let mut best = (before, old);
+                for scale in [0.2, 0.05] {
+                    for d in [Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y(), Vector3::z(), -Vector3::z()] {
+                        let p = old + d * (h * scale);
+                        nodes[n as usize] = if on_surface { surface.closest(&p).point } else { p };
+                        let q = worst(nodes, elements);
+                        if q > best.0 + 1e-9 {
+                            best = (q, nodes[n as usize]);
+                        }
+                    }
+                }
+                nodes[n as usize] = best.1;
             }
         }
     }
