@@ -128,6 +128,12 @@ impl JunctionGeometry {
         self.centre + self.axis * (p.y * along) + page.dir * (p.x.abs() * page.depth)
     }
 
+    /// Angle between two slots' directions about the spine, radians in [0, pi].
+    pub fn angle_between(&self, a: usize, b: usize) -> f64 {
+        let d = (self.slots[b].angle - self.slots[a].angle).rem_euclid(TAU);
+        d.min(TAU - d)
+    }
+
     /// Why a transition of this junction folds, measured, for the message that refuses an
     /// inverted hex in it: the branch's radius against the junction's and the angle to its
     /// nearest neighbour about the spine. Every branch's folded end spans the whole spine, so a
@@ -139,10 +145,7 @@ impl JunctionGeometry {
         let me = &self.slots[slot];
         let nearest = [(slot + 1) % k, (slot + k - 1) % k]
             .iter()
-            .map(|&o| {
-                let d = (self.slots[o].angle - me.angle).rem_euclid(TAU);
-                d.min(TAU - d)
-            })
+            .map(|&o| self.angle_between(slot, o))
             .fold(f64::INFINITY, f64::min);
         format!(
             "the transition of {} folds there: its radius is {:.2} mm, 1/{:.1} of the junction's {:.2} mm, and it \
@@ -490,8 +493,7 @@ pub fn transition_length(geometry: &JunctionGeometry, slot: usize) -> f64 {
     let mut length: f64 = 1.5 * geometry.radius;
     for other in [(slot + 1) % k, (slot + k - 1) % k] {
         let o = &geometry.slots[other];
-        let phi = (o.angle - me.angle).rem_euclid(TAU);
-        let phi = phi.min(TAU - phi).clamp(0.2, PI);
+        let phi = geometry.angle_between(slot, other).clamp(0.2, PI);
         let clear = if phi < 0.5 * PI { me.radius.max(o.radius) * (1.0 + phi.cos()) / phi.sin() } else { 0.0 };
         length = length.max(clear + 0.5 * me.radius);
     }

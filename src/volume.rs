@@ -221,14 +221,12 @@ pub fn build_volume(
         let thickness = crotch_limited_thickness(nodes, &graph, &dirs, surface, &nominal, !junctions.is_empty());
         (dirs, thickness)
     };
-    let (dirs, thickness) = growth(&nodes);
+    // Their ids now; their places once the junction optimisation has settled the surface.
     let mut wall_base = vec![u32::MAX; nodes.len()];
-    for ((&s, dir), thickness) in surface_nodes.iter().zip(&dirs).zip(thickness) {
-        let p = nodes[s as usize];
+    for &s in surface_nodes {
         wall_base[s as usize] = nodes.len() as u32;
-        for &tau in &levels.wall[1..] {
-            nodes.push(p + dir * (thickness * tau));
-        }
+        let p = nodes[s as usize];
+        nodes.extend(levels.wall[1..].iter().map(|_| p));
     }
     let ring = |b: usize, i: usize, level: usize, k: usize| -> u32 {
         if level <= r_cells {
@@ -332,14 +330,12 @@ pub fn build_volume(
     }
     regions.resize(hexes.len(), Region::Lumen);
     improve_junction_nodes(&mut nodes, &hexes, &movable, surface, variant.pattern_search);
-    if movable.contains(&Mobility::OnSurface) {
-        // The wall was laid out on the surface before its nodes slid: grow it again from there.
-        let (dirs, thickness) = growth(&nodes);
-        for ((&s, dir), t) in surface_nodes.iter().zip(&dirs).zip(&thickness) {
-            let p = nodes[s as usize];
-            for (w, &tau) in levels.wall[1..].iter().enumerate() {
-                nodes[wall_base[s as usize] as usize + w] = p + dir * (t * tau);
-            }
+    // The wall grows from the surface where its nodes ended up (they may have slid).
+    let (dirs, thickness) = growth(&nodes);
+    for ((&s, dir), t) in surface_nodes.iter().zip(&dirs).zip(&thickness) {
+        let p = nodes[s as usize];
+        for (w, &tau) in levels.wall[1..].iter().enumerate() {
+            nodes[wall_base[s as usize] as usize + w] = p + dir * (t * tau);
         }
     }
     for region in Region::WALL {
