@@ -1,17 +1,31 @@
 //! Meshing benchmark: `cargo bench` meshes synthetic vessels at the fine preset and at about
 //! 800,000 hexes (the size of the paper's fine aortic arch: 537,750 lumen + 256,500 wall hexes,
 //! remeshed in 132 s) and prints, per stage, seconds and elements per second, then the writers'
-//! throughput. Timings are measured once per case (the stages are deterministic and long enough
+//! throughput; then the bundled Y and T junctions at the medium preset. Timings are measured once per case (the stages are deterministic and long enough
 //! for one run to be representative), on the threads rayon gives (all cores by default).
 
 use std::time::Instant;
 use vesselhex::config::{MeshConfig, Preset};
+use vesselhex::input::{read_centerlines, read_surface, Centerlines, TriangleSurface};
 use vesselhex::pipeline::mesh_vessel;
 use vesselhex::progress::Progress;
+use vesselhex::units::LengthUnit;
 use vesselhex::writers::{WriteOptions, WRITERS};
 
+/// A case's inputs: an unbranched analytic fixture in memory, or a bundled branched fixture
+/// (`fixtures/NAME.stl` and `fixtures/NAME_centerlines.vtp`).
+fn inputs(name: &str) -> (TriangleSurface, Centerlines) {
+    if let Some(inputs) = vesselhex::testing::fixture_inputs(name) {
+        return inputs;
+    }
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    let surface = read_surface(&dir.join(format!("{name}.stl")), LengthUnit::Mm).expect("bundled fixture");
+    let cl = read_centerlines(&dir.join(format!("{name}_centerlines.vtp")), LengthUnit::Mm).expect("its centerlines");
+    (surface, cl)
+}
+
 fn run(label: &str, name: &str, config: &MeshConfig) {
-    let (surface, cl) = vesselhex::testing::fixture_inputs(name).expect("fixture");
+    let (surface, cl) = inputs(name);
     let mut progress = Progress::new(true, 9);
     let t0 = Instant::now();
     let meshed = mesh_vessel(&surface, &cl, config, &mut progress).expect("mesh");
@@ -83,8 +97,16 @@ fn main() {
     let mut big = MeshConfig::preset(Preset::Fine);
     // helical at the fine preset with a shorter axial step: about 800,000 hexes
     big.lumen.axial_spacing_mm = Some(0.0569);
-    let cases: [(&str, &str, &MeshConfig); 3] =
-        [("fine preset", "aaa", &fine), ("fine preset", "helical", &fine), ("800k hexes", "helical", &big)];
+    let medium = MeshConfig::preset(Preset::Medium);
+    // The branched fixtures at the medium preset: their junctions are finished several ways
+    // (README, Branching vessels), the volume stage's cost.
+    let cases: [(&str, &str, &MeshConfig); 5] = [
+        ("fine preset", "aaa", &fine),
+        ("fine preset", "helical", &fine),
+        ("800k hexes", "helical", &big),
+        ("junctions, medium preset", "y_bifurcation", &medium),
+        ("junctions, medium preset", "t_junction", &medium),
+    ];
     if filter.as_deref().is_none_or(|f| "centerlines".contains(f)) {
         centerlines_case();
     }

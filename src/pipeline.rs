@@ -18,7 +18,7 @@ use crate::projection::{clear_transition_length, project_branch, JunctionEnd, Pr
 use crate::quality::Stats;
 use crate::report::{lumen_report, wall_report, BranchReport, InputReport, JunctionReport, Report};
 use crate::surface::LumenSurface;
-use crate::volume::{build_volume, JunctionVariant, RadialLevels};
+use crate::volume::{build_volume, JunctionOptimisation, JunctionVariant, RadialLevels, VolumeInputs};
 use crate::writers::{self, WriteOptions};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -249,7 +249,7 @@ pub fn mesh_tree(
     let template = SectionTemplate::new(l.core_elements, l.core_size, l.ray_reach);
     let junctions = analyse_junctions(&tree, lumen_surface)?;
     check_junction_spacing(&tree, &junctions, lumen_surface)?;
-    if !junctions.is_empty() && l.core_elements % 2 != 0 {
+    if !junctions.is_empty() && !l.core_elements.is_multiple_of(2) {
         return Err(Error::Config(format!(
             "lumen.core_elements = {} is odd: a branching vessel needs an even number (the junction's spine runs \
              along the middle grid line of the core); use {}",
@@ -289,19 +289,16 @@ pub fn mesh_tree(
     let w = &config.wall;
     let thickness = |r: f64| w.thickness_mm.unwrap_or(w.thickness_ratio * r);
     let names: Vec<String> = tree.branches.iter().map(|b| b.name.clone()).collect();
-    let build = |variant: JunctionVariant| {
-        build_volume(
-            &projected,
-            &template,
-            &junctions,
-            &levels,
-            &layers,
-            &thickness,
-            w.growth,
-            variant,
-            names.clone(),
-            lumen_surface,
-        )
+    let inputs = VolumeInputs {
+        projected: &projected,
+        template: &template,
+        junctions: &junctions,
+        levels: &levels,
+        layers: &layers,
+        wall_thickness: &thickness,
+        wall_growth: w.growth,
+        branch_names: &names,
+        surface: lumen_surface,
     };
     // A junction is finished in four ways (eight, below the target), and the one whose worst
     // junction element (then worst junction wall element) is best is kept, the first of equals
@@ -310,16 +307,14 @@ pub fn mesh_tree(
     // and 4:1 goes from 0.121 to 0.205), but in an acute crotch it can cost the wall more than it
     // gives the lumen. In an acute crotch the smoothed normals converge and shear the outer wall
     // layers while the rays, aimed past the crotch, do not; on real surfaces the normals mostly
-    // give the better wall.
-    let mut variants = vec![JunctionVariant::default()];
+    // give the better wall. The wall does not change the optimisation, so each optimised lumen
+    // carries both walls.
+    let mut optimisations = vec![JunctionOptimisation::default()];
+    let mut walls = vec![false];
     if !junctions.is_empty() {
-        for slide_surface_nodes in [false, true] {
-            for wall_along_rays in [false, true] {
-                if (wall_along_rays && w.growth != WallGrowth::Normal) || (!slide_surface_nodes && !wall_along_rays) {
-                    continue;
-                }
-                variants.push(JunctionVariant { wall_along_rays, slide_surface_nodes, pattern_search: false });
-            }
+        optimisations.push(JunctionOptimisation { slide_surface_nodes: true, pattern_search: false });
+        if w.growth == WallGrowth::Normal {
+            walls.push(true);
         }
     }
     // Worst junction element, then worst junction wall element (the lumen's worst is often the
@@ -337,17 +332,22 @@ pub fn mesh_tree(
     };
     // Built side by side; the choice is made in the fixed order above, so it does not depend
     // on the thread count.
-    let build_all = |variants: Vec<JunctionVariant>| -> Vec<FinishedVolume> {
-        variants
-            .into_par_iter()
-            .map(|variant| {
-                let (mesh, junction_of) = build(variant);
-                let q = worst(&mesh, &junction_of);
-                (mesh, junction_of, variant, q)
+    let build_all = |optimisations: &[JunctionOptimisation]| -> Vec<FinishedVolume> {
+        let built: Vec<_> = optimisations
+            .par_iter()
+            .map(|&optimisation| (optimisation, build_volume(&inputs, optimisation, &walls)))
+            .collect();
+        built
+            .into_iter()
+            .flat_map(|(optimisation, (meshes, junction_of))| {
+                meshes.into_iter().zip(&walls).map(move |(mesh, &wall_along_rays)| {
+                    let q = worst(&mesh, &junction_of);
+                    (mesh, junction_of.clone(), JunctionVariant { wall_along_rays, optimisation }, q)
+                })
             })
             .collect()
     };
-    let mut built = build_all(variants.clone());
+    let mut built = build_all(&optimisations);
     let better = |q: (f64, f64), than: (f64, f64)| q.0 > than.0 || (q.0 == than.0 && q.1 > than.1);
     let best_of = |built: &[FinishedVolume]| {
         (1..built.len()).fold(0, |best, i| if better(built[i].3, built[best].3) { i } else { best })
@@ -356,8 +356,9 @@ pub fn mesh_tree(
     // search (the synthetic Y at 30 degrees and 4:1: 0.190 -> 0.293; it can also lose, hence
     // both are kept in the running).
     if !junctions.is_empty() && built[best_of(&built)].3 .0 < JUNCTION_TARGET_SJ {
-        let searched = variants.into_iter().map(|v| JunctionVariant { pattern_search: true, ..v }).collect();
-        built.extend(build_all(searched));
+        let searched: Vec<_> =
+            optimisations.iter().map(|&o| JunctionOptimisation { pattern_search: true, ..o }).collect();
+        built.extend(build_all(&searched));
     }
     let chosen = best_of(&built);
     let (mut mesh, junction_of, junction_variant, _) = built.into_iter().nth(chosen).expect("a variant");
@@ -570,8 +571,8 @@ fn build_report(
                 branches: g.slots.iter().map(|s| meshed.tree.branches[s.branch].name.clone()).collect(),
                 spine_axis: g.axis.into(),
                 wall_growth: if meshed.junction_variant.wall_along_rays { WallGrowth::Ray } else { config.wall.growth },
-                surface_nodes_slid: meshed.junction_variant.slide_surface_nodes,
-                pattern_search: meshed.junction_variant.pattern_search,
+                surface_nodes_slid: meshed.junction_variant.optimisation.slide_surface_nodes,
+                pattern_search: meshed.junction_variant.optimisation.pattern_search,
                 elements: elements.len(),
                 scaled_jacobian: Stats::of(elements.iter().map(|&e| mesh.quality[e].scaled_jacobian)),
                 lumen_equiangle_skew: Stats::of(

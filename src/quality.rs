@@ -15,6 +15,12 @@ use nalgebra::{Point3, Vector3};
 
 /// Scaled Jacobian of a hexahedron given its eight corners in canonical order.
 pub fn scaled_jacobian(c: &[Point3<f64>; 8]) -> f64 {
+    scaled_jacobian_unless_below(c, f64::NEG_INFINITY)
+}
+
+/// The scaled Jacobian when it is above `floor`; otherwise some value at most `floor`, found
+/// as soon as one corner reaches it (an optimiser that only asks "better than?" stops early).
+pub fn scaled_jacobian_unless_below(c: &[Point3<f64>; 8], floor: f64) -> f64 {
     let det_unit = |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>| {
         let l = a.norm() * b.norm() * d.norm();
         if l <= f64::MIN_POSITIVE {
@@ -30,6 +36,9 @@ pub fn scaled_jacobian(c: &[Point3<f64>; 8]) -> f64 {
     let x3 = sum([4, 5, 6, 7]) - sum([0, 1, 2, 3]);
     let mut min = det_unit(x1, x2, x3);
     for (i, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
+        if min <= floor {
+            break;
+        }
         min = min.min(det_unit(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i]));
     }
     min

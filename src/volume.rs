@@ -61,24 +61,47 @@ struct BranchNodes {
     stations: Vec<Vec<u32>>,
 }
 
+/// What the volume is built from: the projected branches and the settings of the mesh.
+pub struct VolumeInputs<'a> {
+    pub projected: &'a [ProjectedBranch],
+    pub template: &'a SectionTemplate,
+    pub junctions: &'a [JunctionGeometry],
+    pub levels: &'a RadialLevels,
+    pub layers: &'a [WallLayer],
+    pub wall_thickness: &'a (dyn Fn(f64) -> f64 + Sync),
+    pub wall_growth: WallGrowth,
+    pub branch_names: &'a [String],
+    pub surface: &'a LumenSurface,
+}
+
 /// Builds nodes, hexes, regions and sets of a vessel from its projected branches (one for an
 /// unbranched vessel). Triads, fibres and quality are filled in by [`crate::annotate`].
 ///
 /// Nodes of a folded end section are shared between the branches of a junction through their
 /// [`FoldKey`]; the wall grows from the lumen-surface nodes once per node, so the junction's
 /// lumen and wall are conformal by construction.
+///
+/// The junction optimisation moves lumen nodes only, so one optimised lumen carries every wall
+/// asked for in `wall_along_rays` (junction nodes' wall along their rays or not): one mesh per
+/// entry, in that order, differing only in the wall nodes' places. The elements' junctions
+/// (`None` outside transitions) are the same for all.
 pub fn build_volume(
-    projected: &[ProjectedBranch],
-    template: &SectionTemplate,
-    junctions: &[JunctionGeometry],
-    levels: &RadialLevels,
-    layers: &[WallLayer],
-    wall_thickness: &dyn Fn(f64) -> f64,
-    wall_growth: WallGrowth,
-    variant: JunctionVariant,
-    branch_names: Vec<String>,
-    surface: &LumenSurface,
-) -> (VesselMesh, Vec<Option<usize>>) {
+    inputs: &VolumeInputs,
+    optimisation: JunctionOptimisation,
+    wall_along_rays: &[bool],
+) -> (Vec<VesselMesh>, Vec<Option<usize>>) {
+    let VolumeInputs {
+        projected,
+        template,
+        junctions,
+        levels,
+        layers,
+        wall_thickness,
+        wall_growth,
+        branch_names,
+        surface,
+    } = *inputs;
+    assert!(!wall_along_rays.is_empty(), "at least one wall is asked for");
     let n = template.n;
     let m = template.ring_len();
     let r_cells = levels.lumen_cells();
@@ -111,7 +134,7 @@ pub fn build_volume(
             let vessel_end = (i == 0 && !matches!(pb.start, BranchEnd::Fold(_)))
                 || (i == last && !matches!(pb.end, BranchEnd::Fold(_)));
             // Folded sections' surface nodes (page rims) stay: the pages stay flat.
-            let surface_movable = variant.slide_surface_nodes && sec.in_junction && fold.is_none() && !vessel_end;
+            let surface_movable = optimisation.slide_surface_nodes && sec.in_junction && fold.is_none() && !vessel_end;
             let in_junction = sec.in_junction;
             let mut add =
                 |key: Option<FoldKey>, p: Point3<f64>, radius: f64, ray: Vector3<f64>, free: Mobility| -> u32 {
@@ -201,14 +224,14 @@ pub fn build_volume(
     let surface_nodes = &graph.nodes;
     let nominal: Vec<f64> = surface_nodes.iter().map(|&s| wall_thickness(node_radius[s as usize])).collect();
     // Growth direction and thickness at every surface node, from the surface as it stands.
-    let growth = |nodes: &[Point3<f64>]| -> (Vec<Vector3<f64>>, Vec<f64>) {
+    let growth = |nodes: &[Point3<f64>], along_rays: bool| -> (Vec<Vector3<f64>>, Vec<f64>) {
         let dirs: Vec<Vector3<f64>> = match wall_growth {
             WallGrowth::Ray => graph.nodes.iter().map(|&s| node_ray[s as usize]).collect(),
             WallGrowth::Normal => {
                 let mut dirs = surface_normals(nodes, &quads, &graph, &node_ray, &end_tangent, &junction_node);
                 // Along the rays in junction transitions, where asked: the caller keeps whichever
                 // wall is better (see `build_volume`'s caller).
-                if variant.wall_along_rays {
+                if along_rays {
                     for (d, &s) in dirs.iter_mut().zip(&graph.nodes) {
                         if junction_node[s as usize] && !end_tangent.contains_key(&s) {
                             *d = node_ray[s as usize].normalize();
@@ -329,15 +352,18 @@ pub fn build_volume(
         }
     }
     regions.resize(hexes.len(), Region::Lumen);
-    improve_junction_nodes(&mut nodes, &hexes, &movable, surface, variant.pattern_search);
+    improve_junction_nodes(&mut nodes, &hexes, &movable, surface, optimisation.pattern_search);
     // The wall grows from the surface where its nodes ended up (they may have slid).
-    let (dirs, thickness) = growth(&nodes);
-    for ((&s, dir), t) in surface_nodes.iter().zip(&dirs).zip(&thickness) {
-        let p = nodes[s as usize];
-        for (w, &tau) in levels.wall[1..].iter().enumerate() {
-            nodes[wall_base[s as usize] as usize + w] = p + dir * (t * tau);
+    let lay_wall = |nodes: &mut [Point3<f64>], along_rays: bool| {
+        let (dirs, thickness) = growth(nodes, along_rays);
+        for ((&s, dir), t) in surface_nodes.iter().zip(&dirs).zip(&thickness) {
+            let p = nodes[s as usize];
+            for (w, &tau) in levels.wall[1..].iter().enumerate() {
+                nodes[wall_base[s as usize] as usize + w] = p + dir * (t * tau);
+            }
         }
-    }
+    };
+    lay_wall(&mut nodes, wall_along_rays[0]);
     for region in Region::WALL {
         for (b, pb) in projected.iter().enumerate() {
             let last = pb.sections.len() - 2;
@@ -416,9 +442,16 @@ pub fn build_volume(
         ends,
         node_sets,
         face_sets,
-        branch_names,
+        branch_names: branch_names.to_vec(),
     };
-    (mesh, junction_of)
+    let mut meshes = Vec::with_capacity(wall_along_rays.len());
+    for &along_rays in &wall_along_rays[1..] {
+        let mut other = mesh.clone();
+        lay_wall(&mut other.nodes, along_rays);
+        meshes.push(other);
+    }
+    meshes.insert(0, mesh);
+    (meshes, junction_of)
 }
 
 /// Sweeps of the junction node optimisation.
@@ -430,10 +463,16 @@ const OPTIMISATION_SWEEPS: usize = 10;
 pub struct JunctionVariant {
     /// The wall grows from junction nodes along their rays instead of the smoothed normal.
     pub wall_along_rays: bool,
-    /// The optimisation also slides the lumen-surface nodes of transitions on the triangles.
+    pub optimisation: JunctionOptimisation,
+}
+
+/// How the junction optimisation may move lumen nodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct JunctionOptimisation {
+    /// The lumen-surface nodes of transitions slide on the triangles too.
     pub slide_surface_nodes: bool,
-    /// Where a move towards the centroid does not help a node, the optimisation probes small
-    /// moves along the axes.
+    /// Where a move towards the centroid does not help a node, small moves along the axes are
+    /// probed.
     pub pattern_search: bool,
 }
 
@@ -508,14 +547,39 @@ fn improve_junction_nodes(
             (n, nb)
         })
         .collect();
-    let worst = |nodes: &[Point3<f64>], elements: &[usize]| -> f64 {
-        elements
-            .iter()
-            .map(|&e| crate::quality::scaled_jacobian(&lumen[e].map(|n| nodes[n as usize])))
-            .fold(f64::INFINITY, f64::min)
+    // The worst scaled Jacobian of the elements, or, once it is at most `floor`, some value at
+    // most `floor`: a trial move is only ever compared with a floor.
+    let worst = |nodes: &[Point3<f64>], elements: &[usize], floor: f64| -> f64 {
+        let mut min = f64::INFINITY;
+        for &e in elements {
+            min = min.min(crate::quality::scaled_jacobian_unless_below(&lumen[e].map(|n| nodes[n as usize]), floor));
+            if min <= floor {
+                break;
+            }
+        }
+        min
     };
+    // A node tried without moving gives the same answer again until a corner of one of its
+    // elements moves, so it is skipped until then (the result is the same as trying it).
+    let corners: HashMap<u32, Vec<u32>> = free
+        .iter()
+        .map(|&n| {
+            let mut c: Vec<u32> = incident[&n].iter().flat_map(|&e| lumen[e]).filter(|&x| x != n).collect();
+            c.sort_unstable();
+            c.dedup();
+            (n, c)
+        })
+        .collect();
+    let mut moves: u64 = 0;
+    let mut moved_at: HashMap<u32, u64> = HashMap::new();
+    let mut still_since: HashMap<u32, u64> = HashMap::new();
     for _ in 0..OPTIMISATION_SWEEPS {
         for &n in &free {
+            if let Some(&since) = still_since.get(&n) {
+                if corners[&n].iter().all(|c| moved_at.get(c).is_none_or(|&t| t <= since)) {
+                    continue;
+                }
+            }
             let elements = &incident[&n];
             let on_surface = movable[n as usize] == Mobility::OnSurface;
             let nb = if on_surface { &on_outer_face[&n] } else { &neighbours[&n] };
@@ -524,12 +588,12 @@ fn improve_junction_nodes(
             }
             let centroid = nb.iter().fold(Vector3::zeros(), |acc, &j| acc + nodes[j as usize].coords) / nb.len() as f64;
             let old = nodes[n as usize];
-            let before = worst(nodes, elements);
+            let before = worst(nodes, elements, f64::NEG_INFINITY);
             let mut moved = false;
             for step in [1.0, 0.5, 0.25] {
                 let p = old + (Point3::from(centroid) - old) * step;
                 nodes[n as usize] = if on_surface { surface.closest(&p).point } else { p };
-                if worst(nodes, elements) > before + 1e-9 {
+                if worst(nodes, elements, before + 1e-9) > before + 1e-9 {
                     moved = true;
                     break;
                 }
@@ -544,13 +608,21 @@ fn improve_junction_nodes(
                     for d in [Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y(), Vector3::z(), -Vector3::z()] {
                         let p = old + d * (h * scale);
                         nodes[n as usize] = if on_surface { surface.closest(&p).point } else { p };
-                        let q = worst(nodes, elements);
+                        let q = worst(nodes, elements, best.0 + 1e-9);
                         if q > best.0 + 1e-9 {
                             best = (q, nodes[n as usize]);
                         }
                     }
                 }
                 nodes[n as usize] = best.1;
+                moved = best.1 != old;
+            }
+            if moved {
+                moves += 1;
+                moved_at.insert(n, moves);
+                still_since.remove(&n);
+            } else {
+                still_since.insert(n, moves);
             }
         }
     }
