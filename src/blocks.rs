@@ -18,59 +18,79 @@ use crate::centerline::CenterlineSample;
 use nalgebra::{Point3, Vector2, Vector3};
 
 /// The 2D O-grid of one cross-section, shared by every station of a branch.
-#[derive(Debug, Clone)]
+///
+/// The core grid may have different numbers of elements across (`nx`) and up (`ny`): a small
+/// side branch's core is meant to get fewer columns than its spine has rows (thin pages,
+/// BRANCHING.md §4.3). Every branch is meshed with the square core of `lumen.core_elements`
+/// today.
+#[derive(Debug, Clone, PartialEq)]
 pub struct SectionTemplate {
-    /// Elements along a side of the core square.
-    pub n: usize,
+    /// Elements along the core's x side (across the pages at a fold).
+    pub nx: usize,
+    /// Elements along the core's y side (along a junction's spine at a fold).
+    pub ny: usize,
     pub core_size: f64,
     pub ray_reach: f64,
-    /// Core grid nodes (i, j) at index j * (n+1) + i, in radius units.
+    /// Core grid nodes (i, j) at index j * (nx+1) + i, in radius units.
     pub core: Vec<Vector2<f64>>,
-    /// For each of the 4n ring points: index of its core grid node.
+    /// For each of the 2(nx+ny) ring points: index of its core grid node.
     pub ring_core_index: Vec<usize>,
     /// For each ring point: unit direction of its target on the outer circle.
     pub target_dir: Vec<Vector2<f64>>,
 }
 
 impl SectionTemplate {
+    /// The square O-grid: an n x n core and 4n ring points.
     pub fn new(n: usize, core_size: f64, ray_reach: f64) -> Self {
+        Self::rect(n, n, core_size, ray_reach)
+    }
+
+    /// An nx x ny core grid over the core square [-a, a]^2 and 2(nx+ny) ring points, numbered
+    /// counter-clockwise from the corner (a, -a): up the side x = a (ny), left along the top
+    /// (nx), down x = -a (ny), right along the bottom (nx). The targets are spread evenly
+    /// round the circle from -45 degrees, so a square grid puts its corners' rays on the
+    /// diagonals.
+    pub fn rect(nx: usize, ny: usize, core_size: f64, ray_reach: f64) -> Self {
         let a = core_size;
-        let core = (0..=n)
-            .flat_map(|j| (0..=n).map(move |i| (i, j)))
-            .map(|(i, j)| Vector2::new(-a + 2.0 * a * i as f64 / n as f64, -a + 2.0 * a * j as f64 / n as f64))
+        let core = (0..=ny)
+            .flat_map(|j| (0..=nx).map(move |i| (i, j)))
+            .map(|(i, j)| Vector2::new(-a + 2.0 * a * i as f64 / nx as f64, -a + 2.0 * a * j as f64 / ny as f64))
             .collect();
-        let idx = |i: usize, j: usize| j * (n + 1) + i;
-        let ring_core_index = (0..4 * n)
-            .map(|k| {
-                let (side, m) = (k / n, k % n);
-                match side {
-                    0 => idx(n, m),
-                    1 => idx(n - m, n),
-                    2 => idx(0, n - m),
-                    _ => idx(m, 0),
-                }
+        let idx = |i: usize, j: usize| j * (nx + 1) + i;
+        let ring = 2 * (nx + ny);
+        let ring_core_index = (0..ring)
+            .map(|k| match k {
+                k if k < ny => idx(nx, k),
+                k if k < ny + nx => idx(nx - (k - ny), ny),
+                k if k < 2 * ny + nx => idx(0, ny - (k - ny - nx)),
+                k => idx(k - 2 * ny - nx, 0),
             })
             .collect();
-        let target_dir = (0..4 * n)
+        let target_dir = (0..ring)
             .map(|k| {
-                let theta = -std::f64::consts::FRAC_PI_4 + std::f64::consts::TAU * k as f64 / (4 * n) as f64;
+                let theta = -std::f64::consts::FRAC_PI_4 + std::f64::consts::TAU * k as f64 / ring as f64;
                 Vector2::new(theta.cos(), theta.sin())
             })
             .collect();
-        SectionTemplate { n, core_size, ray_reach, core, ring_core_index, target_dir }
+        SectionTemplate { nx, ny, core_size, ray_reach, core, ring_core_index, target_dir }
     }
 
     /// Number of ring points (= circumferential elements).
     pub fn ring_len(&self) -> usize {
-        4 * self.n
+        2 * (self.nx + self.ny)
+    }
+
+    /// Number of core grid nodes.
+    pub fn core_len(&self) -> usize {
+        (self.nx + 1) * (self.ny + 1)
     }
 
     /// Core quads as corner indices into `core`, counter-clockwise in (x, y).
     pub fn core_quads(&self) -> Vec<[usize; 4]> {
-        let n = self.n;
-        let idx = |i: usize, j: usize| j * (n + 1) + i;
-        (0..n)
-            .flat_map(|j| (0..n).map(move |i| (i, j)))
+        let (nx, ny) = (self.nx, self.ny);
+        let idx = |i: usize, j: usize| j * (nx + 1) + i;
+        (0..ny)
+            .flat_map(|j| (0..nx).map(move |i| (i, j)))
             .map(|(i, j)| [idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)])
             .collect()
     }
@@ -175,6 +195,43 @@ mod tests {
         // first ring point is the corner (a, -a), its target at -45 degrees
         assert_eq!(t.core[t.ring_core_index[0]], Vector2::new(0.5, -0.5));
         assert!((t.target_dir[0] - Vector2::new(1.0, -1.0).normalize()).norm() < 1e-12);
+    }
+
+    /// A rectangular grid's ring runs counter-clockwise round the core boundary through its
+    /// corners, and its quads cover the core once.
+    #[test]
+    fn rectangular_core_ring_and_quads() {
+        let (nx, ny, a) = (2, 4, 0.5);
+        let t = SectionTemplate::rect(nx, ny, a, 3.0);
+        let ring = t.ring_len();
+        assert_eq!(ring, 12);
+        assert_eq!(t.core.len(), t.core_len());
+        let mut area = 0.0;
+        for k in 0..ring {
+            let p = t.core[t.ring_core_index[k]];
+            let q = t.core[t.ring_core_index[(k + 1) % ring]];
+            let step =
+                if k < ny || (nx + ny..2 * ny + nx).contains(&k) { 2.0 * a / ny as f64 } else { 2.0 * a / nx as f64 };
+            assert!(((q - p).norm() - step).abs() < 1e-12, "ring points {k} and {} are neighbours", k + 1);
+            area += p.x * q.y - q.x * p.y;
+        }
+        assert!((area / 2.0 - 4.0 * a * a).abs() < 1e-12, "the ring encloses the core counter-clockwise");
+        for (k, corner) in [(0, (a, -a)), (ny, (a, a)), (ny + nx, (-a, a)), (2 * ny + nx, (-a, -a))] {
+            assert_eq!(t.core[t.ring_core_index[k]], Vector2::new(corner.0, corner.1), "corner at ring point {k}");
+        }
+        let quads = t.core_quads();
+        assert_eq!(quads.len(), nx * ny);
+        let covered: f64 = quads
+            .iter()
+            .map(|q| {
+                let c: Vec<_> = q.iter().map(|&i| t.core[i]).collect();
+                0.5 * (0..4).map(|k| c[k].x * c[(k + 1) % 4].y - c[(k + 1) % 4].x * c[k].y).sum::<f64>()
+            })
+            .inspect(|&area| assert!(area > 0.0, "quads counter-clockwise"))
+            .sum();
+        assert!((covered - 4.0 * a * a).abs() < 1e-12);
+        // The square grid is the rectangular one with nx = ny, to the bit.
+        assert_eq!(SectionTemplate::new(4, 0.4, 2.0), SectionTemplate::rect(4, 4, 0.4, 2.0));
     }
 
     #[test]

@@ -574,7 +574,17 @@ impl FoldKey {
     pub const SPINE: u32 = u32::MAX;
 
     /// The key of core grid node (i, j) of a slot's template (before turning) at ring level.
-    pub fn new(geometry: &JunctionGeometry, fold: &FoldEnd, n: usize, i: usize, j: usize, level: usize) -> FoldKey {
+    /// Folds split the core down its middle column, so the template is square.
+    pub fn new(
+        geometry: &JunctionGeometry,
+        fold: &FoldEnd,
+        template: &SectionTemplate,
+        i: usize,
+        j: usize,
+        level: usize,
+    ) -> FoldKey {
+        debug_assert_eq!(template.nx, template.ny, "folds take square templates");
+        let n = template.nx;
         let (ti, tj) = turn_core_index(n, fold.quarter_turns, i, j);
         let half = n / 2;
         let (right, left) = geometry.side_pages(fold.slot);

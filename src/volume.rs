@@ -102,11 +102,11 @@ pub fn build_volume(
         surface,
     } = *inputs;
     assert!(!wall_along_rays.is_empty(), "at least one wall is asked for");
-    let n = template.n;
+    let nx = template.nx;
     let m = template.ring_len();
     let r_cells = levels.lumen_cells();
     let w_cells = levels.wall_cells();
-    let core_count = (n + 1) * (n + 1);
+    let core_count = template.core_len();
 
     // Lumen nodes, branch by branch and station by station; folded sections through the pool.
     let mut nodes: Vec<Point3<f64>> = Vec::new();
@@ -155,7 +155,7 @@ pub fn build_volume(
                     id
                 };
             let key = |c: usize, level: usize| {
-                fold.map(|f| FoldKey::new(&junctions[f.junction], &f, n, c % (n + 1), c / (n + 1), level))
+                fold.map(|f| FoldKey::new(&junctions[f.junction], &f, template, c % (nx + 1), c / (nx + 1), level))
             };
             for (c, p) in sec.core.iter().enumerate() {
                 let free = if inner_movable { Mobility::Inner } else { Mobility::Fixed };

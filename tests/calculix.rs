@@ -96,8 +96,7 @@ fn solve(mesh: &VesselMesh, options: &WriteOptions, name: &str) -> Run {
     let last: Vec<f64> = sta
         .lines()
         .filter_map(|l| l.split_whitespace().map(|f| f.parse::<f64>()).collect::<Result<Vec<f64>, _>>().ok())
-        .filter(|f| f.len() == 7)
-        .next_back()
+        .rfind(|f| f.len() == 7)
         .unwrap_or_else(|| panic!("{name}: no converged increment in the .sta:\n{sta}"));
     assert!(
         last[0] == 2.0 && (last[5] - 1.0).abs() < 1e-9,
