@@ -47,9 +47,10 @@ impl SectionTemplate {
 
     /// An nx x ny core grid over the core square [-a, a]^2 and 2(nx+ny) ring points, numbered
     /// counter-clockwise from the corner (a, -a): up the side x = a (ny), left along the top
-    /// (nx), down x = -a (ny), right along the bottom (nx). The targets are spread evenly
-    /// round the circle from -45 degrees, so a square grid puts its corners' rays on the
-    /// diagonals.
+    /// (nx), down x = -a (ny), right along the bottom (nx). Each side's targets are spread
+    /// evenly over its quarter of the circle, from -45 degrees, so the corners' rays lie on
+    /// the diagonals. (Scaled Jacobian and skew do not mind the 2:1 cells of an 8 x 4 grid on
+    /// a square core; the rays and targets keep the lateral blocks square to the wall.)
     pub fn rect(nx: usize, ny: usize, core_size: f64, ray_reach: f64) -> Self {
         let a = core_size;
         let core = (0..=ny)
@@ -66,9 +67,26 @@ impl SectionTemplate {
                 k => idx(k - 2 * ny - nx, 0),
             })
             .collect();
+        use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, TAU};
+        // Each side's ring points aim at its own quarter of the circle, so the corners' rays
+        // stay on the diagonals; a square grid keeps the single even spacing (the same bits).
+        let side_and_fraction = |k: usize| -> (usize, f64) {
+            let sides = [ny, nx, ny, nx];
+            let (mut side, mut rest) = (0, k);
+            while rest >= sides[side] {
+                rest -= sides[side];
+                side += 1;
+            }
+            (side, rest as f64 / sides[side] as f64)
+        };
         let target_dir = (0..ring)
             .map(|k| {
-                let theta = -std::f64::consts::FRAC_PI_4 + std::f64::consts::TAU * k as f64 / ring as f64;
+                let theta = if nx == ny {
+                    -FRAC_PI_4 + TAU * k as f64 / ring as f64
+                } else {
+                    let (side, fraction) = side_and_fraction(k);
+                    -FRAC_PI_4 + FRAC_PI_2 * (side as f64 + fraction)
+                };
                 Vector2::new(theta.cos(), theta.sin())
             })
             .collect();
@@ -230,6 +248,19 @@ mod tests {
             .inspect(|&area| assert!(area > 0.0, "quads counter-clockwise"))
             .sum();
         assert!((covered - 4.0 * a * a).abs() < 1e-12);
+        // Each side's rays aim into its own quarter: the corners' on the diagonals.
+        for k in 0..ring {
+            let (p, d) = (t.core[t.ring_core_index[k]], t.target_dir[k]);
+            let corner = p.x.abs() == a && p.y.abs() == a;
+            if corner {
+                assert!((d - p.normalize()).norm() < 1e-12, "corner ray {k} on the diagonal");
+            } else {
+                assert!(
+                    d.dot(&p) > 0.0 && (d.x.abs() > d.y.abs()) == (p.x.abs() == a),
+                    "ray {k} in its side's quarter"
+                );
+            }
+        }
         // The square grid is the rectangular one with nx = ny, to the bit.
         assert_eq!(SectionTemplate::new(4, 0.4, 2.0), SectionTemplate::rect(4, 4, 0.4, 2.0));
     }

@@ -289,9 +289,10 @@ pub fn mesh_tree(
     let w = &config.wall;
     let thickness = |r: f64| w.thickness_mm.unwrap_or(w.thickness_ratio * r);
     let names: Vec<String> = tree.branches.iter().map(|b| b.name.clone()).collect();
+    let templates = vec![template.clone(); projected.len()];
     let inputs = VolumeInputs {
         projected: &projected,
-        template: &template,
+        templates: &templates,
         junctions: &junctions,
         levels: &levels,
         layers: &layers,

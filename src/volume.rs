@@ -64,7 +64,8 @@ struct BranchNodes {
 /// What the volume is built from: the projected branches and the settings of the mesh.
 pub struct VolumeInputs<'a> {
     pub projected: &'a [ProjectedBranch],
-    pub template: &'a SectionTemplate,
+    /// Each branch's cross-section template, by branch.
+    pub templates: &'a [SectionTemplate],
     pub junctions: &'a [JunctionGeometry],
     pub levels: &'a RadialLevels,
     pub layers: &'a [WallLayer],
@@ -92,7 +93,7 @@ pub fn build_volume(
 ) -> (Vec<VesselMesh>, Vec<Option<usize>>) {
     let VolumeInputs {
         projected,
-        template,
+        templates,
         junctions,
         levels,
         layers,
@@ -102,11 +103,11 @@ pub fn build_volume(
         surface,
     } = *inputs;
     assert!(!wall_along_rays.is_empty(), "at least one wall is asked for");
-    let nx = template.nx;
-    let m = template.ring_len();
+    assert_eq!(templates.len(), projected.len(), "one template per branch");
+    // Ring length of each branch.
+    let ring_len = |b: usize| templates[b].ring_len();
     let r_cells = levels.lumen_cells();
     let w_cells = levels.wall_cells();
-    let core_count = template.core_len();
 
     // Lumen nodes, branch by branch and station by station; folded sections through the pool.
     let mut nodes: Vec<Point3<f64>> = Vec::new();
@@ -119,7 +120,8 @@ pub fn build_volume(
     // How each node may move in the junction optimisation.
     let mut movable: Vec<Mobility> = Vec::new();
     let mut branch_nodes: Vec<BranchNodes> = Vec::with_capacity(projected.len());
-    for pb in projected {
+    for (pb, template) in projected.iter().zip(templates) {
+        let (nx, m, core_count) = (template.nx, template.ring_len(), template.core_len());
         let last = pb.sections.len() - 1;
         let mut stations = Vec::with_capacity(pb.sections.len());
         for (i, sec) in pb.sections.iter().enumerate() {
@@ -182,11 +184,13 @@ pub fn build_volume(
     }
     let lumen_ring = |b: usize, i: usize, level: usize, k: usize| -> u32 {
         let st = &branch_nodes[b].stations[i];
+        let template = &templates[b];
+        let m = template.ring_len();
         let k = k % m;
         if level == 0 {
             st[template.ring_core_index[k]]
         } else {
-            st[core_count + (level - 1) * m + k]
+            st[template.core_len() + (level - 1) * m + k]
         }
     };
 
@@ -195,7 +199,7 @@ pub fn build_volume(
     let mut quads: Vec<[u32; 4]> = Vec::new();
     for (b, pb) in projected.iter().enumerate() {
         for i in 0..pb.sections.len() - 1 {
-            for k in 0..m {
+            for k in 0..ring_len(b) {
                 quads.push([
                     lumen_ring(b, i, r_cells, k),
                     lumen_ring(b, i, r_cells, k + 1),
@@ -213,7 +217,7 @@ pub fn build_volume(
             [(0, matches!(pb.start, BranchEnd::Vessel { .. })), (last, matches!(pb.end, BranchEnd::Vessel { .. }))]
         {
             if is_end {
-                for k in 0..m {
+                for k in 0..ring_len(b) {
                     end_tangent.insert(lumen_ring(b, i, r_cells, k), pb.sections[i].station.frame.tangent);
                 }
             }
@@ -321,19 +325,19 @@ pub fn build_volume(
             BranchEnd::Vessel { .. } => None,
         })
     };
-    let core_quads = template.core_quads();
+    let core_quads: Vec<Vec<[usize; 4]>> = templates.iter().map(|t| t.core_quads()).collect();
     for (b, pb) in projected.iter().enumerate() {
         let last = pb.sections.len() - 2;
         for i in 0..=last {
             let st = (&branch_nodes[b].stations[i], &branch_nodes[b].stations[i + 1]);
             let first_of_interval = hexes.len();
-            for q in &core_quads {
+            for q in &core_quads[b] {
                 hexes.push([
                     st.0[q[0]], st.0[q[1]], st.0[q[2]], st.0[q[3]], st.1[q[0]], st.1[q[1]], st.1[q[2]], st.1[q[3]],
                 ]);
             }
             for level in 0..r_cells {
-                for k in 0..m {
+                for k in 0..ring_len(b) {
                     if level == r_cells - 1 {
                         add_face(sets::LUMEN_WALL_FACES.into(), hexes.len(), FACE_OUTER);
                     }
@@ -372,7 +376,7 @@ pub fn build_volume(
                     if *r != region {
                         continue;
                     }
-                    for k in 0..m {
+                    for k in 0..ring_len(b) {
                         let e = hexes.len();
                         if w == 0 {
                             add_face(sets::WALL_LUMEN_FACES.into(), e, FACE_INNER);
@@ -408,7 +412,7 @@ pub fn build_volume(
         let i = if *is_inlet { 0 } else { pb.sections.len() - 1 };
         node_sets.insert(sets::lumen_end(name), branch_nodes[*b].stations[i].clone());
         let wall: Vec<u32> = (r_cells..=r_cells + w_cells)
-            .flat_map(|l| (0..m).map(move |k| (l, k)))
+            .flat_map(|l| (0..ring_len(*b)).map(move |k| (l, k)))
             .map(|(l, k)| ring(*b, i, l, k))
             .collect();
         node_sets.insert(sets::wall_end(name), wall);
@@ -796,4 +800,80 @@ fn surface_normals(
         normal[i] = unit(v - t * v.dot(t), rays[*id as usize]);
     }
     normal
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::blocks::graded_levels;
+    use crate::centerline::CenterlineTree;
+    use crate::config::MeshConfig;
+    use crate::projection::{project_branch, ProjectionSetup};
+    use crate::testing::{straight_tube_centerline, straight_tube_surface};
+
+    /// Two tubes side by side, one with a square core and one with a rectangular core: each
+    /// branch's counts follow its own template, every hex is valid and the lumen-surface nodes
+    /// lie on the tube.
+    #[test]
+    fn branches_take_their_own_templates() {
+        let (radius, length) = (2.0, 20.0);
+        let config = MeshConfig::default();
+        let tube = straight_tube_surface(radius, length, 96, 40);
+        let surface = LumenSurface::new(&tube).unwrap();
+        let tree = CenterlineTree::build(&straight_tube_centerline(radius, length), &config.centerline, Some(&surface))
+            .unwrap();
+        let spacing = |_: &crate::centerline::CenterlineSample| 1.0;
+        let templates = [SectionTemplate::new(4, 0.5, 3.0), SectionTemplate::rect(4, 2, 0.5, 3.0)];
+        let projected: Vec<ProjectedBranch> = templates
+            .iter()
+            .enumerate()
+            .map(|(b, template)| {
+                let setup = ProjectionSetup {
+                    template,
+                    surface: &surface,
+                    spacing: &spacing,
+                    trim_inlet: 0.0,
+                    trim_outlet: 0.0,
+                    normals_outward: true,
+                };
+                project_branch(&tree.branches[0], b, &setup, None, None).unwrap()
+            })
+            .collect();
+        let layers = config.wall.layers();
+        let levels = RadialLevels::new(graded_levels(3, 1.2), &layers);
+        let thickness = |r: f64| 0.1 * r;
+        let names = vec!["square".to_string(), "rectangular".to_string()];
+        let inputs = VolumeInputs {
+            projected: &projected,
+            templates: &templates,
+            junctions: &[],
+            levels: &levels,
+            layers: &layers,
+            wall_thickness: &thickness,
+            wall_growth: WallGrowth::Ray,
+            branch_names: &names,
+            surface: &surface,
+        };
+        let (meshes, _) = build_volume(&inputs, JunctionOptimisation::default(), &[false]);
+        let mesh = &meshes[0];
+        let (r_cells, w_cells) = (levels.lumen_cells(), levels.wall_cells());
+        for (b, t) in templates.iter().enumerate() {
+            let intervals = projected[b].sections.len() - 1;
+            let of_branch = |range: std::ops::Range<usize>| range.filter(|&e| mesh.branch_of[e] as usize == b).count();
+            assert_eq!(of_branch(mesh.lumen_range()), intervals * (t.nx * t.ny + t.ring_len() * r_cells), "branch {b}");
+            assert_eq!(of_branch(mesh.wall_range()), intervals * t.ring_len() * w_cells, "branch {b}");
+        }
+        for e in 0..mesh.hexes.len() {
+            let q = crate::quality::scaled_jacobian(&mesh.corners(e));
+            assert!(q > 0.2, "element {e} of branch {} has scaled Jacobian {q}", mesh.branch_of[e]);
+        }
+        let interface = &mesh.node_sets[crate::mesh::sets::INTERFACE_NODES];
+        let per_branch: usize = templates.iter().zip(&projected).map(|(t, p)| t.ring_len() * p.sections.len()).sum();
+        assert_eq!(interface.len(), per_branch);
+        for &n in interface {
+            let p = mesh.nodes[n as usize];
+            let off_axis = (p.x * p.x + p.y * p.y).sqrt();
+            assert!((off_axis - radius).abs() < 0.02 * radius, "interface node {n} at {off_axis} mm from the axis");
+        }
+    }
 }
