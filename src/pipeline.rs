@@ -29,7 +29,8 @@ pub struct Meshed {
     pub tree: CenterlineTree,
     pub projected: Vec<ProjectedBranch>,
     pub accuracy: SurfaceAccuracy,
-    pub template: SectionTemplate,
+    /// Each branch's cross-section template, by branch.
+    pub templates: Vec<SectionTemplate>,
     pub junctions: Vec<JunctionGeometry>,
     /// The junction each element belongs to (its branch's transition), if any.
     pub junction_of: Vec<Option<usize>>,
@@ -48,15 +49,18 @@ struct BranchPlan {
 /// Turns every branch's frames so that its template lies on the folds of its junctions: a
 /// constant turn when one end meets a junction; between two junctions, the nearest quarter turn
 /// at the downstream one and the rest spread linearly along the branch.
-fn plan_branches(
+///
+/// `setup_of(b)` is branch b's projection set-up (its own template).
+fn plan_branches<'a>(
     tree: &CenterlineTree,
     junctions: &[JunctionGeometry],
-    setup: &ProjectionSetup,
+    setup_of: &dyn Fn(usize) -> ProjectionSetup<'a>,
 ) -> Result<Vec<BranchPlan>> {
     tree.branches
         .iter()
         .enumerate()
         .map(|(b, branch)| {
+            let setup = &setup_of(b);
             let mut branch = branch.clone();
             let len = branch.length();
             let at_junction = |j: Option<usize>, at_start: bool| -> Result<Option<(usize, usize, Option<f64>)>> {
@@ -246,7 +250,9 @@ pub fn mesh_tree(
 
     progress.stage("projection");
     let l = &config.lumen;
-    let template = SectionTemplate::new(l.core_elements, l.core_size, l.ray_reach);
+    // Every branch gets the square O-grid of the settings (thin pages, BRANCHING.md §4.3, are
+    // to give small side branches rectangular cores of their own).
+    let templates = vec![SectionTemplate::new(l.core_elements, l.core_size, l.ray_reach); tree.branches.len()];
     let junctions = analyse_junctions(&tree, lumen_surface)?;
     check_junction_spacing(&tree, &junctions, lumen_surface)?;
     if !junctions.is_empty() && !l.core_elements.is_multiple_of(2) {
@@ -258,15 +264,15 @@ pub fn mesh_tree(
         )));
     }
     let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
-    let setup = ProjectionSetup {
-        template: &template,
+    let setup_of = |b: usize| ProjectionSetup {
+        template: &templates[b],
         surface: lumen_surface,
         spacing: &spacing,
         trim_inlet: config.centerline.trim_inlet,
         trim_outlet: config.centerline.trim_outlet,
         normals_outward,
     };
-    let plans = plan_branches(&tree, &junctions, &setup)?;
+    let plans = plan_branches(&tree, &junctions, &setup_of)?;
     let projected: Vec<ProjectedBranch> = plans
         .iter()
         .enumerate()
@@ -275,7 +281,7 @@ pub fn mesh_tree(
                 e.map(|(j, fold, length)| JunctionEnd { geometry: &junctions[j], fold, transition_length: length })
             };
             let (start, finish) = (end(&plan.start), end(&plan.end));
-            project_branch(&plan.branch, b, &setup, start.as_ref(), finish.as_ref())
+            project_branch(&plan.branch, b, &setup_of(b), start.as_ref(), finish.as_ref())
         })
         .collect::<Result<_>>()?;
 
@@ -289,7 +295,6 @@ pub fn mesh_tree(
     let w = &config.wall;
     let thickness = |r: f64| w.thickness_mm.unwrap_or(w.thickness_ratio * r);
     let names: Vec<String> = tree.branches.iter().map(|b| b.name.clone()).collect();
-    let templates = vec![template.clone(); projected.len()];
     let inputs = VolumeInputs {
         projected: &projected,
         templates: &templates,
@@ -397,7 +402,7 @@ pub fn mesh_tree(
     progress.stage("surface accuracy");
     let aligned: Vec<Branch> = plans.into_iter().map(|p| p.branch).collect();
     let accuracy = surface_accuracy(&mesh, lumen_surface, &aligned, &projected)?;
-    Ok(Meshed { mesh, tree, projected, accuracy, template, junctions, junction_of, junction_variant })
+    Ok(Meshed { mesh, tree, projected, accuracy, templates, junctions, junction_of, junction_variant })
 }
 
 /// Everything `vesselhex mesh` was asked.
@@ -549,7 +554,7 @@ fn build_report(
             meshed_from: p.s_start * scale,
             meshed_to: p.s_end * scale,
             stations: p.sections.len(),
-            circumferential_elements: meshed.template.ring_len(),
+            circumferential_elements: meshed.templates[p.branch].ring_len(),
             inlet_end: end_kind(&p.start),
             outlet_end: end_kind(&p.end),
             elements: mesh.branch_of.iter().filter(|&&x| x as usize == p.branch).count(),
