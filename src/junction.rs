@@ -433,14 +433,36 @@ pub fn check_junction_spacing(
     Ok(())
 }
 
-/// Quarter turns of the template as index maps on the core grid: turning by 90 degrees
-/// counter-clockwise sends (x, y) to (-y, x).
-pub fn turn_core_index(n: usize, q: u8, i: usize, j: usize) -> (usize, usize) {
-    let (mut i, mut j) = (i, j);
+/// Quarter turns of the template as index maps on its nx x ny core grid: turning by 90
+/// degrees counter-clockwise sends (x, y) to (-y, x), so grid node (i, j) goes to (ny - j, i)
+/// of the turned ny x nx grid (see [`turned_dims`]).
+pub fn turn_core_index(nx: usize, ny: usize, q: u8, i: usize, j: usize) -> (usize, usize) {
+    let (mut i, mut j, mut rows, mut cols) = (i, j, ny, nx);
     for _ in 0..q % 4 {
-        (i, j) = (n - j, i);
+        (i, j) = (rows - j, i);
+        (cols, rows) = (rows, cols);
     }
     (i, j)
+}
+
+/// The (columns, rows) of an nx x ny core grid after q quarter turns.
+pub fn turned_dims(nx: usize, ny: usize, q: u8) -> (usize, usize) {
+    if q.is_multiple_of(2) {
+        (nx, ny)
+    } else {
+        (ny, nx)
+    }
+}
+
+/// The quarter turns a branch's template may take at a fold: any for a square core; for a
+/// rectangular one only those that keep its rows along the spine (the junction's spine cells
+/// are its rows at both ends).
+pub fn allowed_turns(template: &SectionTemplate) -> &'static [u8] {
+    if template.nx == template.ny {
+        &[0, 1, 2, 3]
+    } else {
+        &[0, 2]
+    }
 }
 
 /// A template point turned by q quarter turns.
@@ -583,10 +605,9 @@ impl FoldKey {
         j: usize,
         level: usize,
     ) -> FoldKey {
-        debug_assert_eq!(template.nx, template.ny, "folds take square templates");
-        let n = template.nx;
-        let (ti, tj) = turn_core_index(n, fold.quarter_turns, i, j);
-        let half = n / 2;
+        // The fold splits the turned core down its middle column.
+        let (ti, tj) = turn_core_index(template.nx, template.ny, fold.quarter_turns, i, j);
+        let half = turned_dims(template.nx, template.ny, fold.quarter_turns).0 / 2;
         let (right, left) = geometry.side_pages(fold.slot);
         let page = match ti.cmp(&half) {
             std::cmp::Ordering::Equal => FoldKey::SPINE,
@@ -609,14 +630,27 @@ mod tests {
 
     #[test]
     fn quarter_turns_of_indices_match_turns_of_points() {
-        let t = SectionTemplate::new(4, 0.5, 2.0);
-        for q in 0..4u8 {
-            for j in 0..=4 {
-                for i in 0..=4 {
-                    let (ti, tj) = turn_core_index(4, q, i, j);
-                    let p = turn(q, &t.core[j * 5 + i]);
-                    assert!((t.core[tj * 5 + ti] - p).norm() < 1e-12);
+        for (nx, ny) in [(4, 4), (4, 2), (2, 6)] {
+            let t = SectionTemplate::rect(nx, ny, 0.5, 2.0);
+            for q in 0..4u8 {
+                let (tnx, tny) = turned_dims(nx, ny, q);
+                // The turned template: the grid of the turned dimensions over the same square.
+                let turned = SectionTemplate::rect(tnx, tny, 0.5, 2.0);
+                let mut seen = std::collections::HashSet::new();
+                for j in 0..=ny {
+                    for i in 0..=nx {
+                        let (ti, tj) = turn_core_index(nx, ny, q, i, j);
+                        assert!(ti <= tnx && tj <= tny, "{nx}x{ny} q {q}: ({i}, {j}) -> ({ti}, {tj})");
+                        let p = turn(q, &t.core[j * (nx + 1) + i]);
+                        assert!((turned.core[tj * (tnx + 1) + ti] - p).norm() < 1e-12, "{nx}x{ny} q {q}");
+                        seen.insert((ti, tj));
+                    }
                 }
+                assert_eq!(seen.len(), t.core_len(), "a turn is one-to-one");
+            }
+            assert_eq!(allowed_turns(&t).len(), if nx == ny { 4 } else { 2 });
+            for &q in allowed_turns(&t) {
+                assert_eq!(turned_dims(nx, ny, q), (nx, ny), "allowed turns keep the rows along the spine");
             }
         }
     }

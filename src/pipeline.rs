@@ -10,7 +10,8 @@ use crate::config::{MeshConfig, WallGrowth};
 use crate::error::{Error, Result};
 use crate::input::{read_centerlines, read_surface, Centerlines, TriangleSurface};
 use crate::junction::{
-    analyse_junctions, check_junction_spacing, fold_normal, signed_angle, twist_frames, FoldEnd, JunctionGeometry,
+    allowed_turns, analyse_junctions, check_junction_spacing, fold_normal, signed_angle, twist_frames, FoldEnd,
+    JunctionGeometry,
 };
 use crate::mesh::VesselMesh;
 use crate::progress::Progress;
@@ -102,7 +103,9 @@ fn plan_branches<'a>(
                 Some((j, _, _)) => {
                     let base = phi0.unwrap_or(0.0);
                     let q = if phi0.is_some() {
-                        (0..4u8)
+                        allowed_turns(setup.template)
+                            .iter()
+                            .copied()
                             .min_by(|&a, &b| {
                                 let d = |q| {
                                     (turn_needed(s1, j, q) - base + std::f64::consts::PI)

@@ -347,7 +347,7 @@ fn is_bridge(lo: f64, hi: f64, length: f64) -> bool {
 /// A section clears a junction when its rays all meet the wall from inside within this many
 /// local radii of the centerline (a ray that runs further has found a neighbouring branch).
 const CLEAR_REACH: f64 = 2.0;
-/// Turns of the ray set tried per clear-section test, over a quarter turn.
+/// Turns of the ray set tried per clear-section test, over the O-grid's period.
 const CLEAR_TURNS: usize = 12;
 /// A last ordinary section must be followed by this many clear ones, a quarter radius apart.
 const CLEAR_RUN_STEPS: usize = 8;
@@ -391,9 +391,11 @@ pub fn clear_transition_length(
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     let at = |d: f64| branch.at(if at_start { d } else { len - d });
     // The frames are turned afterwards to meet the junctions, so rays are tried at several
-    // turns over a quarter turn (the O-grid's period): the section must be clear whatever the
-    // final turn.
-    let spacing_angle = std::f64::consts::FRAC_PI_2 / CLEAR_TURNS as f64;
+    // turns over the O-grid's period (a quarter turn for a square core, a half turn for a
+    // rectangular one): the section must be clear whatever the final turn.
+    let period =
+        if setup.template.nx == setup.template.ny { std::f64::consts::FRAC_PI_2 } else { std::f64::consts::PI };
+    let spacing_angle = period / CLEAR_TURNS as f64;
     // Ordinary sections are planes across the centerline: where it bends on a radius of
     // curvature near the vessel's radius (it often swings towards the junction centre in its
     // last radius or two), neighbouring sections cross on the inner side of the bend.
