@@ -8,9 +8,11 @@ use std::collections::HashMap;
 use std::path::Path;
 use vesselhex::config::{MeshConfig, Preset};
 use vesselhex::input::{read_centerlines, read_surface};
+use vesselhex::junction::FoldKey;
 use vesselhex::mesh::{face_nodes, sets, VesselMesh};
 use vesselhex::pipeline::{mesh_vessel, Meshed};
 use vesselhex::progress::Progress;
+use vesselhex::projection::BranchEnd;
 use vesselhex::synthetic_branching::{write_branching_fixture, SideBranches, TJunction, YBifurcation};
 use vesselhex::units::LengthUnit;
 
@@ -159,8 +161,52 @@ fn assert_topology(name: &str, m: &Meshed) {
     }
 }
 
+/// The branches that share a page place its nodes at the same points: each branch computes its
+/// folded end section itself (core nodes on the pages, rays cast to the rim), and the volume
+/// keeps one node per page position, so the two computations must agree.
+fn assert_pages_agree(name: &str, m: &Meshed) {
+    let mut placed: HashMap<FoldKey, (usize, nalgebra::Point3<f64>)> = HashMap::new();
+    let mut shared = 0;
+    for (b, pb) in m.projected.iter().enumerate() {
+        let template = &m.templates[b];
+        let last = pb.sections.len() - 1;
+        for (end, i) in [(pb.start, 0), (pb.end, last)] {
+            let BranchEnd::Fold(fold) = end else { continue };
+            let geometry = &m.junctions[fold.junction];
+            let sec = &pb.sections[i];
+            let stride = template.nx + 1;
+            // Surface (rim) nodes are keyed with a level of their own, apart from the core's 0.
+            const RIM: usize = usize::MAX;
+            let key = |c: usize, level: usize| FoldKey::new(geometry, &fold, template, c % stride, c / stride, level);
+            let points = sec
+                .core
+                .iter()
+                .enumerate()
+                .map(|(c, p)| (key(c, 0), *p))
+                .chain(sec.surface.iter().enumerate().map(|(k, p)| (key(template.ring_core_index[k], RIM), *p)));
+            for (key, p) in points {
+                match placed.get(&key) {
+                    Some(&(other, q)) if other != b => {
+                        shared += 1;
+                        assert!(
+                            (p - q).norm() <= 1e-9 * geometry.radius,
+                            "{name}: branches {other} and {b} place page node {key:?} {:.2e} mm apart",
+                            (p - q).norm()
+                        );
+                    }
+                    _ => {
+                        placed.insert(key, (b, p));
+                    }
+                }
+            }
+        }
+    }
+    assert!(shared > 0 || m.junctions.is_empty(), "{name}: no page node is shared");
+}
+
 fn check_all(name: &str, m: &Meshed) -> Figures {
     assert_topology(name, m);
+    assert_pages_agree(name, m);
     assert_conformal(name, &m.mesh);
     assert_triads_continuous(name, m);
     let f = figures(m);
