@@ -120,12 +120,14 @@ impl JunctionGeometry {
     }
 
     /// The folded end section of a slot: a template point (x, y), in radius units and already
-    /// turned by the branch's quarter turns, on its page. x = 0 is the spine.
-    pub fn fold(&self, slot: usize, p: &Vector2<f64>) -> Point3<f64> {
+    /// turned by the branch's quarter turns, on its page. The spine cuts the template at
+    /// `cut` (x = 0 for a fold split down the middle).
+    pub fn fold(&self, slot: usize, p: &Vector2<f64>, cut: &SpineCut) -> Point3<f64> {
+        let x = cut.across(p.x);
         let (right, left) = self.side_pages(slot);
-        let page = &self.pages[if p.x >= 0.0 { right } else { left }];
+        let page = &self.pages[if x >= 0.0 { right } else { left }];
         let along = if p.y >= 0.0 { self.spine_up } else { self.spine_down };
-        self.centre + self.axis * (p.y * along) + page.dir * (p.x.abs() * page.depth)
+        self.centre + self.axis * (p.y * along) + page.dir * (x.abs() * page.depth)
     }
 
     /// Angle between two slots' directions about the spine, radians in [0, pi].
@@ -174,12 +176,13 @@ impl JunctionGeometry {
     /// Direction in which the transition curve of a template point arrives at the fold, seen
     /// from the slot's side: along the wedge bisector at the spine, turning towards the page's
     /// normal away from it so that hexes meet the page at a good angle.
-    pub fn arrival(&self, slot: usize, p: &Vector2<f64>, core_size: f64) -> Vector3<f64> {
+    pub fn arrival(&self, slot: usize, p: &Vector2<f64>, cut: &SpineCut) -> Vector3<f64> {
+        let x = cut.across(p.x);
         let (right, left) = self.side_pages(slot);
-        let page = if p.x >= 0.0 { right } else { left };
+        let page = if x >= 0.0 { right } else { left };
         let w = -self.wedge_bisector(slot);
         let n = -self.page_normal_towards(page, slot);
-        let beta = 0.5 * (p.x.abs() / core_size).min(1.0);
+        let beta = 0.5 * (x.abs() / cut.core_size).min(1.0);
         (w * (1.0 - beta) + n * beta).normalize()
     }
 }
@@ -481,6 +484,53 @@ pub struct FoldEnd {
     pub slot: usize,
     /// Quarter turns from the branch's template to the fold's.
     pub quarter_turns: u8,
+    /// The core grid column of the turned template that lies on the spine: the columns on
+    /// either side of it go to the two pages (the middle one today; a small branch's thin
+    /// pages, BRANCHING.md §4.3, are to move it).
+    pub split: usize,
+}
+
+impl FoldEnd {
+    /// A fold split down the middle column of the turned template.
+    pub fn middle(junction: usize, slot: usize, quarter_turns: u8, template: &SectionTemplate) -> FoldEnd {
+        let split = turned_dims(template.nx, template.ny, quarter_turns).0 / 2;
+        FoldEnd { junction, slot, quarter_turns, split }
+    }
+
+    /// Where the spine cuts the turned template.
+    pub fn spine_cut(&self, template: &SectionTemplate) -> SpineCut {
+        let columns = turned_dims(template.nx, template.ny, self.quarter_turns).0;
+        let a = template.core_size;
+        // Exactly 0 down the middle, whatever the rounding of the grid's x.
+        let x = if 2 * self.split == columns { 0.0 } else { -a + 2.0 * a * self.split as f64 / columns as f64 };
+        SpineCut { x, core_size: a }
+    }
+}
+
+/// Where the spine cuts a turned template (x, radius units) and the core's half-width.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpineCut {
+    pub x: f64,
+    pub core_size: f64,
+}
+
+impl SpineCut {
+    /// Signed distance across the fold from the spine of a template x: the core on each side
+    /// of the cut is stretched to the core's half-width, so a page's core nodes lie where every
+    /// branch sharing that page puts them; from the core's edges outwards (ray targets) x is
+    /// kept.
+    pub fn across(&self, x: f64) -> f64 {
+        if self.x == 0.0 {
+            return x;
+        }
+        let d = x - self.x;
+        let side = if d >= 0.0 { self.core_size - self.x } else { self.core_size + self.x };
+        if d.abs() <= side {
+            d * self.core_size / side
+        } else {
+            d.signum() * (self.core_size + d.abs() - side)
+        }
+    }
 }
 
 /// The frame normal a branch must have at a junction's transition station for its template,
@@ -553,13 +603,14 @@ pub fn transition_points(
     towards_junction: &Vector3<f64>,
     params: &[f64],
 ) -> Vec<TransitionPoints> {
+    let cut = fold.spine_cut(template);
     let curve = |xy: &Vector2<f64>| {
         let p0 = template.place(station, xy);
         let turned = turn(fold.quarter_turns, xy);
-        let p1 = geometry.fold(fold.slot, &turned);
+        let p1 = geometry.fold(fold.slot, &turned, &cut);
         let chord = (p1 - p0).norm();
         let t0 = towards_junction * chord;
-        let t1 = geometry.arrival(fold.slot, &turned, template.core_size) * chord;
+        let t1 = geometry.arrival(fold.slot, &turned, &cut) * chord;
         (p0, t0, p1, t1)
     };
     let core_curves: Vec<_> = template.core.iter().map(curve).collect();
@@ -605,9 +656,8 @@ impl FoldKey {
         j: usize,
         level: usize,
     ) -> FoldKey {
-        // The fold splits the turned core down its middle column.
         let (ti, tj) = turn_core_index(template.nx, template.ny, fold.quarter_turns, i, j);
-        let half = turned_dims(template.nx, template.ny, fold.quarter_turns).0 / 2;
+        let half = fold.split;
         let (right, left) = geometry.side_pages(fold.slot);
         let page = match ti.cmp(&half) {
             std::cmp::Ordering::Equal => FoldKey::SPINE,
@@ -651,6 +701,82 @@ mod tests {
             assert_eq!(allowed_turns(&t).len(), if nx == ny { 4 } else { 2 });
             for &q in allowed_turns(&t) {
                 assert_eq!(turned_dims(nx, ny, q), (nx, ny), "allowed turns keep the rows along the spine");
+            }
+        }
+    }
+
+    /// A junction of three daughters-and-parent slots about the z axis, pages at 60, 180 and
+    /// 300 degrees of depths 2, 3 and 4.
+    fn three_pages() -> JunctionGeometry {
+        let slot = |branch: usize, angle_deg: f64| JunctionSlot {
+            branch,
+            is_parent: branch == 0,
+            direction: Vector3::new(angle_deg.to_radians().cos(), angle_deg.to_radians().sin(), 0.0),
+            angle: angle_deg.to_radians(),
+            radius: 1.0,
+        };
+        let page = |angle_deg: f64, depth: f64| Page {
+            dir: Vector3::new(angle_deg.to_radians().cos(), angle_deg.to_radians().sin(), 0.0),
+            angle: angle_deg.to_radians(),
+            depth,
+        };
+        JunctionGeometry {
+            index: 0,
+            centre: Point3::origin(),
+            radius: 2.0,
+            axis: Vector3::z(),
+            reference: Vector3::x(),
+            slots: vec![slot(0, 0.0), slot(1, 120.0), slot(2, 240.0)],
+            pages: vec![page(60.0, 2.0), page(180.0, 3.0), page(300.0, 4.0)],
+            spine_up: 2.5,
+            spine_down: 1.5,
+        }
+    }
+
+    /// A fold split down the middle keeps every template x as it is (to the bit); an
+    /// off-centre split puts its column on the spine and each side's core edge at the core's
+    /// half-width.
+    #[test]
+    fn spine_cut_measures_across_from_the_split() {
+        let square = SectionTemplate::new(8, 0.5, 2.0);
+        for q in 0..4u8 {
+            let cut = FoldEnd::middle(0, 1, q, &square).spine_cut(&square);
+            for p in &square.core {
+                assert_eq!(cut.across(p.x).to_bits(), p.x.to_bits());
+            }
+        }
+        let off = FoldEnd { junction: 0, slot: 1, quarter_turns: 0, split: 6 }.spine_cut(&square);
+        let x = |i: usize| square.core[i].x;
+        assert!(off.across(x(6)).abs() < 1e-15, "the split column is on the spine");
+        assert!((off.across(x(8)) - 0.5).abs() < 1e-15 && (off.across(x(0)) + 0.5).abs() < 1e-15);
+        assert!((off.across(x(7)) - 0.25).abs() < 1e-15, "two columns share the right half-width");
+        assert!((off.across(x(3)) + 0.25).abs() < 1e-15, "six columns share the left half-width");
+        for x in [1.5, -1.5, 0.5, -0.5] {
+            assert!((off.across(x) - x).abs() < 1e-15, "from the core's edges outwards, x is kept: {x}");
+        }
+    }
+
+    /// A large branch split two columns from its right edge and a small 4-column branch split
+    /// down its middle share a two-column page: both give its core nodes the same keys and
+    /// the same points.
+    #[test]
+    fn unequal_splits_agree_on_a_shared_page() {
+        let g = three_pages();
+        let large = SectionTemplate::new(8, 0.5, 2.0);
+        let small = SectionTemplate::rect(4, 8, 0.5, 2.0);
+        let fold_large = FoldEnd { junction: 0, slot: 1, quarter_turns: 0, split: 6 };
+        let fold_small = FoldEnd::middle(0, 2, 0, &small);
+        assert_eq!(g.side_pages(1).0, g.side_pages(2).1, "slot 1's right page is slot 2's left");
+        let (cut_large, cut_small) = (fold_large.spine_cut(&large), fold_small.spine_cut(&small));
+        for j in 0..=8 {
+            for from_spine in 0..=2 {
+                let (il, is) = (6 + from_spine, 2 - from_spine);
+                let kl = FoldKey::new(&g, &fold_large, &large, il, j, 0);
+                let ks = FoldKey::new(&g, &fold_small, &small, is, j, 0);
+                assert_eq!(kl, ks, "row {j}, {from_spine} from the spine");
+                let pl = g.fold(1, &large.core[j * 9 + il], &cut_large);
+                let ps = g.fold(2, &small.core[j * 5 + is], &cut_small);
+                assert!((pl - ps).norm() < 1e-12, "row {j}, {from_spine} from the spine: {pl} vs {ps}");
             }
         }
     }

@@ -132,8 +132,8 @@ fn plan_branches<'a>(
             }
             Ok(BranchPlan {
                 branch,
-                start: start.map(|(j, slot, l)| (j, FoldEnd { junction: j, slot, quarter_turns: 0 }, l)),
-                end: end.map(|(j, slot, l)| (j, FoldEnd { junction: j, slot, quarter_turns: q_end }, l)),
+                start: start.map(|(j, slot, l)| (j, FoldEnd::middle(j, slot, 0, setup.template), l)),
+                end: end.map(|(j, slot, l)| (j, FoldEnd::middle(j, slot, q_end, setup.template), l)),
             })
         })
         .collect()

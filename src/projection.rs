@@ -616,7 +616,7 @@ fn cast_fold(
 
 /// Direction in which a transition arrives at the fold at the template point `xy`.
 fn fold_arrival(j: &JunctionEnd, template: &SectionTemplate, xy: &Vector2<f64>) -> Vector3<f64> {
-    j.geometry.arrival(j.fold.slot, &crate::junction::turn(j.fold.quarter_turns, xy), template.core_size)
+    j.geometry.arrival(j.fold.slot, &crate::junction::turn(j.fold.quarter_turns, xy), &j.fold.spine_cut(template))
 }
 
 /// A guide curve (Hermite end points and tangents) for each ring node.
