@@ -56,6 +56,8 @@ pub struct Page {
     pub angle: f64,
     /// Distance from the centre to the lumen wall along `dir`, mm (the page's length scale).
     pub depth: f64,
+    /// Core cells across the page, from the spine to the rim.
+    pub cells: usize,
 }
 
 /// The geometry of one junction.
@@ -75,6 +77,8 @@ pub struct JunctionGeometry {
     /// Distances from the centre to the wall along +axis and -axis, mm.
     pub spine_up: f64,
     pub spine_down: f64,
+    /// Core cells along the spine.
+    pub spine_cells: usize,
 }
 
 fn describe_point(p: &Point3<f64>) -> String {
@@ -350,6 +354,7 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
         pages: vec![],
         spine_up: 0.0,
         spine_down: 0.0,
+        spine_cells: 0,
     };
     let reach = 20.0 * r_x;
     for i in 0..k {
@@ -359,7 +364,7 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
         let angle = a.angle + width * a.radius / (a.radius + b.radius);
         let dir = geometry.direction_at(angle);
         let depth = wall_distance(surface, &x, &dir, reach, &where_)?;
-        geometry.pages.push(Page { dir, angle: angle.rem_euclid(TAU), depth });
+        geometry.pages.push(Page { dir, angle: angle.rem_euclid(TAU), depth, cells: 0 });
     }
     geometry.spine_up = wall_distance(surface, &x, &axis, reach, &where_)?;
     geometry.spine_down = wall_distance(surface, &x, &(-axis), reach, &where_)?;
@@ -436,6 +441,66 @@ pub fn check_junction_spacing(
     Ok(())
 }
 
+/// Gives every junction the default cell counts of an n x n core: n along the spine and n/2
+/// across each page, so every branch keeps the square core folded down its middle.
+pub fn equal_cells(junctions: &mut [JunctionGeometry], n: usize) {
+    for g in junctions {
+        g.spine_cells = n;
+        for page in &mut g.pages {
+            page.cells = n / 2;
+        }
+    }
+}
+
+/// The core grid (columns, rows) a slot's fold asks of its branch: the cells of its two pages
+/// across, the spine's along.
+pub fn fold_dims(geometry: &JunctionGeometry, slot: usize) -> (usize, usize) {
+    let (right, left) = geometry.side_pages(slot);
+    (geometry.pages[right].cells + geometry.pages[left].cells, geometry.spine_cells)
+}
+
+/// Each branch's core grid (nx, ny), from the cells of the junctions at its ends: a branch
+/// takes its first junction's fold dimensions (an unbranched vessel's, `n` x `n`); a branch
+/// between two junctions must find the same at the other (a square core in any turn, a
+/// rectangular one with its rows along both spines), or the junctions' cell counts cannot be
+/// joined along it.
+pub fn branch_core_dims(
+    tree: &CenterlineTree,
+    junctions: &[JunctionGeometry],
+    n: usize,
+    surface: &LumenSurface,
+) -> Result<Vec<(usize, usize)>> {
+    tree.branches
+        .iter()
+        .enumerate()
+        .map(|(b, branch)| {
+            let ends: Vec<&JunctionGeometry> =
+                [branch.start_junction, branch.end_junction].into_iter().flatten().map(|j| &junctions[j]).collect();
+            let Some(first) = ends.first() else { return Ok((n, n)) };
+            let dims = fold_dims(first, first.slot_of(b));
+            for other in &ends[1..] {
+                let there = fold_dims(other, other.slot_of(b));
+                let fits = there == dims || (dims.0 == dims.1 && there == (dims.1, dims.0));
+                if !fits {
+                    return Err(Error::Geometry(format!(
+                        "{}: {} joins {} and {}, whose folds ask for core grids of {} x {} and {} x {} cells: \
+                         the junctions' page cells cannot be joined along it",
+                        surface.source.display(),
+                        branch.name,
+                        first.describe(tree),
+                        other.describe(tree),
+                        dims.0,
+                        dims.1,
+                        there.0,
+                        there.1
+                    )));
+                }
+            }
+            Ok(dims)
+        })
+        .collect()
+}
+
 /// Quarter turns of the template as index maps on its nx x ny core grid: turning by 90
 /// degrees counter-clockwise sends (x, y) to (-y, x), so grid node (i, j) goes to (ny - j, i)
 /// of the turned ny x nx grid (see [`turned_dims`]).
@@ -491,10 +556,17 @@ pub struct FoldEnd {
 }
 
 impl FoldEnd {
-    /// A fold split down the middle column of the turned template.
-    pub fn middle(junction: usize, slot: usize, quarter_turns: u8, template: &SectionTemplate) -> FoldEnd {
-        let split = turned_dims(template.nx, template.ny, quarter_turns).0 / 2;
-        FoldEnd { junction, slot, quarter_turns, split }
+    /// The fold of a slot: the turned template's columns left of the spine go to the slot's
+    /// -x page, as many as that page has cells.
+    pub fn at(geometry: &JunctionGeometry, slot: usize, quarter_turns: u8, template: &SectionTemplate) -> FoldEnd {
+        let (right, left) = geometry.side_pages(slot);
+        let split = geometry.pages[left].cells;
+        debug_assert_eq!(
+            turned_dims(template.nx, template.ny, quarter_turns),
+            (split + geometry.pages[right].cells, geometry.spine_cells),
+            "the template fits the fold"
+        );
+        FoldEnd { junction: geometry.index, slot, quarter_turns, split }
     }
 
     /// Where the spine cuts the turned template.
@@ -719,6 +791,7 @@ mod tests {
             dir: Vector3::new(angle_deg.to_radians().cos(), angle_deg.to_radians().sin(), 0.0),
             angle: angle_deg.to_radians(),
             depth,
+            cells: 0,
         };
         JunctionGeometry {
             index: 0,
@@ -730,6 +803,7 @@ mod tests {
             pages: vec![page(60.0, 2.0), page(180.0, 3.0), page(300.0, 4.0)],
             spine_up: 2.5,
             spine_down: 1.5,
+            spine_cells: 8,
         }
     }
 
@@ -740,7 +814,7 @@ mod tests {
     fn spine_cut_measures_across_from_the_split() {
         let square = SectionTemplate::new(8, 0.5, 2.0);
         for q in 0..4u8 {
-            let cut = FoldEnd::middle(0, 1, q, &square).spine_cut(&square);
+            let cut = FoldEnd { junction: 0, slot: 1, quarter_turns: q, split: 4 }.spine_cut(&square);
             for p in &square.core {
                 assert_eq!(cut.across(p.x).to_bits(), p.x.to_bits());
             }
@@ -765,7 +839,7 @@ mod tests {
         let large = SectionTemplate::new(8, 0.5, 2.0);
         let small = SectionTemplate::rect(4, 8, 0.5, 2.0);
         let fold_large = FoldEnd { junction: 0, slot: 1, quarter_turns: 0, split: 6 };
-        let fold_small = FoldEnd::middle(0, 2, 0, &small);
+        let fold_small = FoldEnd { junction: 0, slot: 2, quarter_turns: 0, split: 2 };
         assert_eq!(g.side_pages(1).0, g.side_pages(2).1, "slot 1's right page is slot 2's left");
         let (cut_large, cut_small) = (fold_large.spine_cut(&large), fold_small.spine_cut(&small));
         for j in 0..=8 {
@@ -779,6 +853,33 @@ mod tests {
                 assert!((pl - ps).norm() < 1e-12, "row {j}, {from_spine} from the spine: {pl} vs {ps}");
             }
         }
+    }
+
+    /// Equal cells give every slot the square n x n fold split down its middle; thin pages
+    /// beside a slot give it a rectangular core and move its neighbours' splits.
+    #[test]
+    fn page_cells_set_the_folds() {
+        let mut g = three_pages();
+        equal_cells(std::slice::from_mut(&mut g), 8);
+        let square = SectionTemplate::new(8, 0.5, 2.0);
+        for slot in 0..3 {
+            assert_eq!(fold_dims(&g, slot), (8, 8));
+            for q in 0..4u8 {
+                assert_eq!(FoldEnd::at(&g, slot, q, &square).split, 4);
+            }
+        }
+        // Slot 2 between two thin pages (pages 1 and 2), the page between slots 0 and 1 deep.
+        for (page, cells) in g.pages.iter_mut().zip([6, 2, 2]) {
+            page.cells = cells;
+        }
+        assert_eq!(fold_dims(&g, 2), (4, 8), "the small branch gets a 4 x 8 core");
+        assert_eq!(fold_dims(&g, 1), (8, 8));
+        assert_eq!(fold_dims(&g, 0), (8, 8));
+        let (right, left) = g.side_pages(1);
+        assert_eq!(FoldEnd::at(&g, 1, 0, &square).split, g.pages[left].cells);
+        assert_eq!(g.pages[right].cells + g.pages[left].cells, 8);
+        let small = SectionTemplate::rect(4, 8, 0.5, 2.0);
+        assert_eq!(FoldEnd::at(&g, 2, 2, &small).split, 2);
     }
 
     #[test]

@@ -10,8 +10,8 @@ use crate::config::{MeshConfig, WallGrowth};
 use crate::error::{Error, Result};
 use crate::input::{read_centerlines, read_surface, Centerlines, TriangleSurface};
 use crate::junction::{
-    allowed_turns, analyse_junctions, check_junction_spacing, fold_normal, signed_angle, twist_frames, FoldEnd,
-    JunctionGeometry,
+    allowed_turns, analyse_junctions, branch_core_dims, check_junction_spacing, equal_cells, fold_normal, signed_angle,
+    twist_frames, FoldEnd, JunctionGeometry,
 };
 use crate::mesh::VesselMesh;
 use crate::progress::Progress;
@@ -132,8 +132,8 @@ fn plan_branches<'a>(
             }
             Ok(BranchPlan {
                 branch,
-                start: start.map(|(j, slot, l)| (j, FoldEnd::middle(j, slot, 0, setup.template), l)),
-                end: end.map(|(j, slot, l)| (j, FoldEnd::middle(j, slot, q_end, setup.template), l)),
+                start: start.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, 0, setup.template), l)),
+                end: end.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, q_end, setup.template), l)),
             })
         })
         .collect()
@@ -253,10 +253,7 @@ pub fn mesh_tree(
 
     progress.stage("projection");
     let l = &config.lumen;
-    // Every branch gets the square O-grid of the settings (thin pages, BRANCHING.md §4.3, are
-    // to give small side branches rectangular cores of their own).
-    let templates = vec![SectionTemplate::new(l.core_elements, l.core_size, l.ray_reach); tree.branches.len()];
-    let junctions = analyse_junctions(&tree, lumen_surface)?;
+    let mut junctions = analyse_junctions(&tree, lumen_surface)?;
     check_junction_spacing(&tree, &junctions, lumen_surface)?;
     if !junctions.is_empty() && !l.core_elements.is_multiple_of(2) {
         return Err(Error::Config(format!(
@@ -266,6 +263,13 @@ pub fn mesh_tree(
             l.core_elements + 1
         )));
     }
+    // Every junction's pages get half the core's cells, so every branch keeps the square O-grid
+    // of the settings (thin pages, BRANCHING.md §4.3, are to give small side branches fewer).
+    equal_cells(&mut junctions, l.core_elements);
+    let templates: Vec<SectionTemplate> = branch_core_dims(&tree, &junctions, l.core_elements, lumen_surface)?
+        .into_iter()
+        .map(|(nx, ny)| SectionTemplate::rect(nx, ny, l.core_size, l.ray_reach))
+        .collect();
     let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
     let setup_of = |b: usize| ProjectionSetup {
         template: &templates[b],
