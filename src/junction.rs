@@ -128,10 +128,20 @@ impl JunctionGeometry {
     /// `cut` (x = 0 for a fold split down the middle).
     pub fn fold(&self, slot: usize, p: &Vector2<f64>, cut: &SpineCut) -> Point3<f64> {
         let x = cut.across(p.x);
-        let (right, left) = self.side_pages(slot);
-        let page = &self.pages[if x >= 0.0 { right } else { left }];
+        let page = &self.pages[self.page_of(slot, x)];
         let along = if p.y >= 0.0 { self.spine_up } else { self.spine_down };
         self.centre + self.axis * (p.y * along) + page.dir * (x.abs() * page.depth)
+    }
+
+    /// The page of a slot's fold that a point lies on, from its signed distance `x` across the
+    /// fold from the spine ([`SpineCut::across`]): the +x page from the spine on.
+    fn page_of(&self, slot: usize, x: f64) -> usize {
+        let (right, left) = self.side_pages(slot);
+        if x >= 0.0 {
+            right
+        } else {
+            left
+        }
     }
 
     /// Angle between two slots' directions about the spine, radians in [0, pi].
@@ -182,8 +192,7 @@ impl JunctionGeometry {
     /// normal away from it so that hexes meet the page at a good angle.
     pub fn arrival(&self, slot: usize, p: &Vector2<f64>, cut: &SpineCut) -> Vector3<f64> {
         let x = cut.across(p.x);
-        let (right, left) = self.side_pages(slot);
-        let page = if x >= 0.0 { right } else { left };
+        let page = self.page_of(slot, x);
         let w = -self.wedge_bisector(slot);
         let n = -self.page_normal_towards(page, slot);
         let beta = 0.5 * (x.abs() / cut.core_size).min(1.0);
@@ -480,8 +489,7 @@ pub fn branch_core_dims(
             let dims = fold_dims(first, first.slot_of(b));
             for other in &ends[1..] {
                 let there = fold_dims(other, other.slot_of(b));
-                let fits = there == dims || (dims.0 == dims.1 && there == (dims.1, dims.0));
-                if !fits {
+                if there != dims {
                     return Err(Error::Geometry(format!(
                         "{}: {} joins {} and {}, whose folds ask for core grids of {} x {} and {} x {} cells: \
                          the junctions' page cells cannot be joined along it",
