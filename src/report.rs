@@ -68,6 +68,8 @@ pub struct JunctionReport {
     /// Whether the optimisation also ran its pattern search (tried when the worst junction
     /// element is below 0.3).
     pub pattern_search: bool,
+    /// Whether the pages' nodes moved in the optimisation too (tried with the pattern search).
+    pub pages_moved: bool,
     pub elements: usize,
     pub scaled_jacobian: Stats,
     pub lumen_equiangle_skew: Stats,

@@ -131,12 +131,14 @@ pub fn build_volume(
                 _ => None,
             };
             let mut ids = Vec::with_capacity(core_count + r_cells * m);
-            let inner_movable = sec.in_junction && fold.is_none();
+            // A folded section's nodes are the pages' (pooled: one node whichever slot adds it,
+            // with the same mobility), so moving them keeps the junction conformal.
+            let section_movable = sec.in_junction && (fold.is_none() || optimisation.move_pages);
+            let inner_movable = section_movable;
             // A vessel end's section stays as it is (its nodes are the end's sets and plane).
             let vessel_end = (i == 0 && !matches!(pb.start, BranchEnd::Fold(_)))
                 || (i == last && !matches!(pb.end, BranchEnd::Fold(_)));
-            // Folded sections' surface nodes (page rims) stay: the pages stay flat.
-            let surface_movable = optimisation.slide_surface_nodes && sec.in_junction && fold.is_none() && !vessel_end;
+            let surface_movable = optimisation.slide_surface_nodes && section_movable && !vessel_end;
             let in_junction = sec.in_junction;
             let mut add =
                 |key: Option<FoldKey>, p: Point3<f64>, radius: f64, ray: Vector3<f64>, free: Mobility| -> u32 {
@@ -478,16 +480,21 @@ pub struct JunctionOptimisation {
     /// Where a move towards the centroid does not help a node, small moves along the axes are
     /// probed.
     pub pattern_search: bool,
+    /// The pages' nodes (folded sections, spine included) move too; their rims slide on the
+    /// triangles when `slide_surface_nodes` is set. Flat pages fold every slot across the
+    /// junction's whole spine; bent ones give room to the branch that needs it.
+    pub move_pages: bool,
 }
 
 /// Which junction nodes the optimisation may move, and how.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Mobility {
     Fixed,
-    /// An inner lumen node of a transition section: moves freely.
+    /// An inner lumen node of a transition section (of a folded one when the pages move):
+    /// moves freely.
     Inner,
-    /// A lumen-surface node of a transition section (neither folded nor a vessel end's):
-    /// slides on the triangles.
+    /// A lumen-surface node of a transition section (not a vessel end's; a folded one's only
+    /// when the pages move): slides on the triangles.
     OnSurface,
 }
 
@@ -496,8 +503,9 @@ enum Mobility {
 /// (a surface node: of its neighbours along the surface, then onto the nearest point of the
 /// triangles, so it stays on the surface to rounding), by the largest of a few step fractions
 /// that improves the worst lumen element around it, or else (`pattern_search`) by the best of
-/// small moves along the axes. Fold (page) nodes never move, so the
-/// junction stays conformal and its pages flat. Sequential, so the result does not depend on
+/// small moves along the axes. Fold (page) nodes move only when `build_volume` was asked to
+/// move the pages; being shared by the slots around them, they keep the junction conformal
+/// either way. Sequential, so the result does not depend on
 /// the thread count. Only lumen elements count: `build_volume` grows the wall again from the
 /// surface once its nodes have slid.
 fn improve_junction_nodes(
