@@ -16,6 +16,7 @@ use crate::input::Centerlines;
 use crate::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
+pub(crate) use rooted::ForcedMerge;
 use rooted::{hang, RootedTree};
 use skeleton::{Line, Skeleton};
 
@@ -128,6 +129,9 @@ impl Branch {
 pub struct CenterlineTree {
     pub branches: Vec<Branch>,
     pub junctions: Vec<Junction>,
+    /// Per branch, the skeleton edge it was built from (the same on every build from the same
+    /// file and settings), to name a branch to [`CenterlineTree::build_merging`].
+    pub(crate) segments: Vec<usize>,
 }
 
 impl CenterlineTree {
@@ -148,6 +152,17 @@ impl CenterlineTree {
         centerlines: &Centerlines,
         config: &CenterlineConfig,
         surface: Option<&LumenSurface>,
+    ) -> Result<CenterlineTree> {
+        Self::build_merging(centerlines, config, surface, &[])
+    }
+
+    /// [`CenterlineTree::build`], with the junctions at the ends of the `forced` segments merged
+    /// into their upstream neighbours, whatever their distance.
+    pub(crate) fn build_merging(
+        centerlines: &Centerlines,
+        config: &CenterlineConfig,
+        surface: Option<&LumenSurface>,
+        forced: &[ForcedMerge],
     ) -> Result<CenterlineTree> {
         let path = &centerlines.source;
         if centerlines.polylines.is_empty() {
@@ -171,12 +186,12 @@ impl CenterlineTree {
                 start_junction: None,
                 end_junction: None,
             };
-            return Ok(CenterlineTree { branches: vec![branch], junctions: vec![] });
+            return Ok(CenterlineTree { branches: vec![branch], junctions: vec![], segments: vec![0] });
         }
         let tags: Vec<_> = centerlines.polylines.iter().map(|l| l.cell_tags.clone()).collect();
         let skeleton = Skeleton::from_lines(lines, &tags, path)?;
         let inlet = choose_inlet(&skeleton, inlet_point, path)?;
-        let mut rooted = hang(skeleton, inlet, config.junction_merge_radii, path)?;
+        let mut rooted = hang(skeleton, inlet, config.junction_merge_radii, forced, path)?;
         if let Some(surface) = surface {
             junction_centre::centre_junctions(&mut rooted, surface);
         }
@@ -394,7 +409,7 @@ fn assemble(rooted: &RootedTree, config: &CenterlineConfig) -> Result<Centerline
             end_junction,
         });
     }
-    Ok(CenterlineTree { branches, junctions })
+    Ok(CenterlineTree { branches, junctions, segments: rooted.order.clone() })
 }
 
 /// How a branch's first frame is found.

@@ -393,6 +393,29 @@ pub fn check_junction_spacing(
     junctions: &[JunctionGeometry],
     surface: &LumenSurface,
 ) -> Result<()> {
+    match find_junction_overlap(tree, junctions, surface) {
+        Some(overlap) => Err(overlap.error),
+        None => Ok(()),
+    }
+}
+
+/// Two junctions whose block patterns would overlap, at the two ends of `branch`.
+#[derive(Debug)]
+pub struct JunctionOverlap {
+    pub branch: usize,
+    /// The two junctions, as errors name them.
+    pub place: String,
+    /// What [`check_junction_spacing`] reports: both junctions, the distances, the branch that
+    /// leaves from the crotch.
+    pub error: Error,
+}
+
+/// The first branch whose junctions overlap (see [`check_junction_spacing`]), if any.
+pub fn find_junction_overlap(
+    tree: &CenterlineTree,
+    junctions: &[JunctionGeometry],
+    surface: &LumenSurface,
+) -> Option<JunctionOverlap> {
     for (b, branch) in tree.branches.iter().enumerate() {
         let (Some(ja), Some(jb)) = (branch.start_junction, branch.end_junction) else { continue };
         for (here, there) in [(&junctions[ja], &junctions[jb]), (&junctions[jb], &junctions[ja])] {
@@ -424,12 +447,13 @@ pub fn check_junction_spacing(
                     .min_by(|&&x, &&y| gap(x).total_cmp(&gap(y)))
                     .expect("a junction has other branches")];
                 let outlet = culprit.samples.last().expect("branches have samples").point;
-                return Err(Error::Geometry(format!(
+                let error = Error::Geometry(format!(
                     "{}: {} and {} overlap: the crotch between {} and {} lies {:.1} mm from the first junction's \
                      centre along {}, past the second junction ({:.1} mm away, where {} meet). {} has no length \
-                     of its own on that side: {} (ending at {}) leaves from that crotch. vesselhex cannot mesh \
-                     this pattern yet (it needs pages of unequal depth, BRANCHING.md §4.3); with {} clipped \
-                     from the surface and the centerlines, the two junctions no longer meet",
+                     of its own on that side: {} (ending at {}) leaves from that crotch. Merged into one, such \
+                     junctions mesh; these could not be (they still overlap after merging, or too many pairs \
+                     do: pages of unequal depth would be needed, BRANCHING.md §4.3); with {} clipped from the \
+                     surface and the centerlines, the two junctions no longer meet",
                     surface.source.display(),
                     here.describe(tree),
                     there.describe(tree),
@@ -443,11 +467,13 @@ pub fn check_junction_spacing(
                     culprit.name,
                     describe_point(&outlet),
                     culprit.name,
-                )));
+                ));
+                let place = format!("{} and {}", here.describe(tree), there.describe(tree));
+                return Some(JunctionOverlap { branch: b, place, error });
             }
         }
     }
-    Ok(())
+    None
 }
 
 /// Gives every junction the default cell counts of an n x n core: n along the spine and n/2

@@ -462,6 +462,15 @@ pub fn build_volume(
 
 /// Sweeps of the junction node optimisation.
 const OPTIMISATION_SWEEPS: usize = 10;
+/// Where an element stays below [`EXTRA_SWEEPS_BELOW`] after those, the optimisation goes on up
+/// to this many sweeps (or until no node moves): gmsh_aortic_arch's left common carotid, a fifth
+/// of its junction's radius, funnels into a fold the whole spine high; after ten sweeps its
+/// funnel is inverted at the medium preset wherever the junction is centred, after thirty it is
+/// valid (lumen min 0.201; at the coarse preset 0.173 -> 0.207). The vessels meshing within the
+/// bars never get there, so they cost no more.
+const MAX_OPTIMISATION_SWEEPS: usize = 30;
+/// The bar on the scaled Jacobian.
+const EXTRA_SWEEPS_BELOW: f64 = 0.2;
 
 /// How a branched vessel's junctions are finished; the caller builds the variants and keeps
 /// the best (see `pipeline::mesh_tree`).
@@ -585,7 +594,17 @@ fn improve_junction_nodes(
     let mut moves: u64 = 0;
     let mut moved_at: HashMap<u32, u64> = HashMap::new();
     let mut still_since: HashMap<u32, u64> = HashMap::new();
-    for _ in 0..OPTIMISATION_SWEEPS {
+    let all_incident: Vec<usize> = {
+        let mut v: Vec<usize> = incident.values().flatten().copied().collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    for sweep in 0..MAX_OPTIMISATION_SWEEPS {
+        if sweep >= OPTIMISATION_SWEEPS && worst(nodes, &all_incident, EXTRA_SWEEPS_BELOW) > EXTRA_SWEEPS_BELOW {
+            break;
+        }
+        let moves_before = moves;
         for &n in &free {
             if let Some(&since) = still_since.get(&n) {
                 if corners[&n].iter().all(|c| moved_at.get(c).is_none_or(|&t| t <= since)) {
@@ -636,6 +655,9 @@ fn improve_junction_nodes(
             } else {
                 still_since.insert(n, moves);
             }
+        }
+        if moves == moves_before {
+            break;
         }
     }
 }

@@ -81,7 +81,7 @@ fn largest_ball_near(surface: &LumenSurface, start: Point3<f64>, d0: f64, reach:
 /// Moves the points of a polyline within `blend` (arc length) of one end by a smoothly fading
 /// share of `shift`, the end itself exactly by `shift`, and eases the radii towards `radius`
 /// there. The other end never moves (the blend stops short of mid-line).
-fn bend_end(
+pub(super) fn bend_end(
     points: &mut [Point3<f64>],
     radii: &mut [f64],
     at_start: bool,

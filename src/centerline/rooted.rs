@@ -27,10 +27,26 @@ pub(crate) struct RootedTree {
     pub parted: Vec<bool>,
 }
 
+/// A junction merged into its upstream neighbour whatever their distance: the one at the end of
+/// skeleton edge `segment` (a branch between two junctions), because the two junctions' block
+/// patterns would overlap (see `junction::find_junction_overlap`). The merged junction is
+/// centred on the segment, the fraction `at` of its length from the upstream end.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct ForcedMerge {
+    pub segment: usize,
+    pub at: f64,
+}
+
 /// Orients the skeleton from node `inlet`, joins pass-through nodes, merges junctions whose
-/// centres are closer than `merge_radii` times the upstream junction's radius, and orders the
-/// branches.
-pub(crate) fn hang(skeleton: Skeleton, inlet: usize, merge_radii: f64, source: &Path) -> Result<RootedTree> {
+/// centres are closer than `merge_radii` times the upstream junction's radius (or that `forced`
+/// names), and orders the branches.
+pub(crate) fn hang(
+    skeleton: Skeleton,
+    inlet: usize,
+    merge_radii: f64,
+    forced: &[ForcedMerge],
+    source: &Path,
+) -> Result<RootedTree> {
     let Skeleton { mut nodes, mut edges, .. } = skeleton;
     let mut incident: Vec<Vec<usize>> = vec![vec![]; nodes.len()];
     for (i, e) in edges.iter().enumerate() {
@@ -101,7 +117,7 @@ pub(crate) fn hang(skeleton: Skeleton, inlet: usize, merge_radii: f64, source: &
 
     let first_parted = nodes.len();
     split_shared_trunks(&mut nodes, &mut edges, &mut children, &mut parent, inlet);
-    let parted = (0..nodes.len()).map(|v| v >= first_parted).collect();
+    let mut parted: Vec<bool> = (0..nodes.len()).map(|v| v >= first_parted).collect();
     let bfs = descendants(&children, &edges, inlet);
 
     // A node between exactly two edges is no junction: join the edges.
@@ -123,12 +139,14 @@ pub(crate) fn hang(skeleton: Skeleton, inlet: usize, merge_radii: f64, source: &
             continue;
         }
         let reach = merge_radii * nodes[j].radius;
+        let mut recentre: Option<(usize, f64)> = None;
         loop {
             let close = children[j].iter().position(|&e| {
                 let k = edges[e].ends[1];
                 children[k].len() >= 2
                     && ((nodes[k].point - nodes[j].point).norm() < reach
-                        || edges[e].line.length() < DEGENERATE_SEGMENT * nodes[j].radius)
+                        || edges[e].line.length() < DEGENERATE_SEGMENT * nodes[j].radius
+                        || forced.iter().any(|f| f.segment == e))
             });
             let Some(at) = close else { break };
             let e = children[j][at];
@@ -140,7 +158,15 @@ pub(crate) fn hang(skeleton: Skeleton, inlet: usize, merge_radii: f64, source: &
                 edges[f].line = line;
                 edges[f].ends[0] = j;
             }
+            if recentre.is_none() {
+                recentre = forced.iter().find(|f| f.segment == e).map(|f| (e, f.at));
+            }
             children[j].splice(at..=at, absorbed);
+        }
+        if let (Some((segment, at)), Some(into)) = (recentre, parent[j]) {
+            recentre_merged(&mut nodes[j], &mut edges, into, &children[j], segment, at);
+            // On the segment by construction: not to be moved to a larger ball.
+            parted[j] = true;
         }
     }
 
@@ -166,6 +192,50 @@ pub(crate) fn hang(skeleton: Skeleton, inlet: usize, merge_radii: f64, source: &
     }
     Ok(RootedTree { nodes, edges, children, parent, order, parted })
 }
+
+/// Moves a merged junction `node` onto the segment it absorbed, the fraction `at` of its length
+/// along: the edge `into` it (from upstream) runs on along the segment to the new centre, the
+/// daughters that came through the segment start there, and the others bend to it over a few
+/// radii. Where two junctions overlap, the middle of the merged one lies between them (on the
+/// aortic arch, the brachiocephalic-carotid trunk's arch-side crotch lies past its far end).
+fn recentre_merged(node: &mut Node, edges: &mut [Edge], into: usize, daughters: &[usize], segment: usize, at: f64) {
+    let line = edges[segment].line.clone();
+    let arcs = line.arcs();
+    let target = at.clamp(0.0, 1.0) * arcs[arcs.len() - 1];
+    let k = (1..arcs.len()).find(|&k| arcs[k] > target).unwrap_or(arcs.len() - 1);
+    let t = ((target - arcs[k - 1]) / (arcs[k] - arcs[k - 1])).clamp(0.0, 1.0);
+    let centre = line.points[k - 1] + (line.points[k] - line.points[k - 1]) * t;
+    let radius = line.radii[k - 1] + (line.radii[k] - line.radii[k - 1]) * t;
+    // The segment up to the centre, and from it (no repeated point at either side of the cut).
+    let mut head = Line { points: line.points[..k].to_vec(), radii: line.radii[..k].to_vec(), normals: None };
+    if t > 0.0 {
+        head.points.push(centre);
+        head.radii.push(radius);
+    }
+    let skip = if (line.points[k] - centre).norm() > 0.0 { k } else { k + 1 };
+    let shift = centre - node.point;
+    let blend = (BLEND_MOVES * shift.norm()).max(2.0 * node.radius);
+    for &d in daughters {
+        let l = &mut edges[d].line;
+        if l.points.len() >= line.points.len() && l.points[..line.points.len()] == line.points[..] {
+            // Came through the segment: starts at the centre.
+            l.points.splice(0..skip, [centre]);
+            l.radii.splice(0..skip, [radius]);
+            l.normals = None;
+        } else {
+            super::junction_centre::bend_end(&mut l.points, &mut l.radii, true, shift, radius, blend);
+        }
+    }
+    if head.points.len() >= 2 {
+        edges[into].line.extend(&head);
+    }
+    node.point = centre;
+    node.radius = radius;
+}
+
+/// Length over which a merged junction's other daughters bend to its new centre, in multiples of
+/// the move (at least twice the junction's radius).
+const BLEND_MOVES: f64 = 3.0;
 
 /// Two daughters of a node that run together (within [`APART`] radii of each other) for at
 /// least this many radii from it share a trunk.
@@ -354,5 +424,55 @@ mod tests {
         split_shared_trunks(&mut nodes2, &mut edges2, &mut children2, &mut parent2, 0);
         assert_eq!(nodes2.len(), 4);
         assert_eq!(children2[1], vec![1, 2]);
+    }
+    /// A junction at (0, 0, 10) with a side branch along +x and a 6 mm trunk up z that divides
+    /// at (0, 0, 16): merged with the centre put 3/4 along the trunk, the inlet runs on to
+    /// (0, 0, 14.5), the trunk's daughters start there (their lines keep the trunk's last 1.5 mm),
+    /// and the side branch bends to it while its far part stays.
+    #[test]
+    fn a_forced_merge_centres_the_junction_on_the_absorbed_segment() {
+        use nalgebra::Vector3;
+        let node = |p: Point3<f64>| Node { point: p, radius: 1.0, key: 0 };
+        let up = |a: f64, b: f64| {
+            line((0..=((b - a) * 4.0) as usize).map(|i| Point3::new(0.0, 0.0, a + 0.25 * i as f64)).collect())
+        };
+        let out = |from: Point3<f64>, d: Vector3<f64>| line((0..=40).map(|i| from + d * (0.25 * i as f64)).collect());
+        let (j, k) = (Point3::new(0.0, 0.0, 10.0), Point3::new(0.0, 0.0, 16.0));
+        let side = out(j, Vector3::x());
+        let (left, right) = (out(k, Vector3::new(-0.6, 0.0, 0.8)), out(k, Vector3::new(0.6, 0.0, 0.8)));
+        let nodes = vec![
+            node(Point3::origin()),
+            node(j),
+            node(*side.points.last().unwrap()),
+            node(k),
+            node(*left.points.last().unwrap()),
+            node(*right.points.last().unwrap()),
+        ];
+        let edges = vec![
+            Edge { ends: [0, 1], line: up(0.0, 10.0), source: 0 },
+            Edge { ends: [1, 2], line: side.clone(), source: 1 },
+            Edge { ends: [1, 3], line: up(10.0, 16.0), source: 2 },
+            Edge { ends: [3, 4], line: left, source: 3 },
+            Edge { ends: [3, 5], line: right, source: 4 },
+        ];
+        let skeleton = Skeleton { nodes, edges, file_start: Some(0), layout: "test" };
+        let tree = hang(skeleton, 0, 0.0, &[ForcedMerge { segment: 2, at: 0.75 }], Path::new("t")).unwrap();
+        let centre = Point3::new(0.0, 0.0, 14.5);
+        assert_eq!(tree.children[1].len(), 3, "one junction of three daughters");
+        assert!((tree.nodes[1].point - centre).norm() < 1e-12, "{:?}", tree.nodes[1].point);
+        assert!(tree.parted[1], "not moved again to a larger ball");
+        let inlet = &tree.edges[tree.parent[1].unwrap()].line;
+        assert_eq!(*inlet.points.last().unwrap(), tree.nodes[1].point);
+        assert!((inlet.length() - 14.5).abs() < 1e-9, "the inlet runs on along the trunk");
+        for &d in &tree.children[1] {
+            let l = &tree.edges[d].line;
+            assert_eq!(l.points[0], tree.nodes[1].point, "daughter {d} starts at the centre");
+            assert!(l.points.windows(2).all(|s| (s[1] - s[0]).norm() > 1e-9), "no repeated point");
+        }
+        for d in [3, 4] {
+            assert!((tree.edges[d].line.length() - 11.5).abs() < 1e-9, "1.5 mm of trunk, then 10 mm of branch");
+        }
+        let bent = &tree.edges[1].line;
+        assert_eq!(bent.points.last(), side.points.last(), "the side branch's far end stays");
     }
 }
