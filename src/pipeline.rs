@@ -276,8 +276,8 @@ pub fn mesh_vessel(
 
 /// Where the junction merged from two overlapping ones is centred: fractions of the branch
 /// between them from the upstream one. Measured on gmsh_aortic_arch (the brachiocephalic-carotid
-/// trunk, whose arch-side crotch lies past its far end): only 7/8 meshes at the medium preset,
-/// 5/8 and 7/8 at the coarse one, 1/2 at neither.
+/// trunk, whose arch-side crotch lies past its far end): all three mesh at the coarse preset,
+/// only 7/8 at the medium one, 1/2 at neither.
 const MERGED_CENTRE_AT: [f64; 3] = [0.625, 0.75, 0.875];
 
 /// At most this many pairs of overlapping junctions are merged in one vessel.

@@ -204,15 +204,23 @@ fn recentre_merged(node: &mut Node, edges: &mut [Edge], into: usize, daughters: 
     let target = at.clamp(0.0, 1.0) * arcs[arcs.len() - 1];
     let k = (1..arcs.len()).find(|&k| arcs[k] > target).unwrap_or(arcs.len() - 1);
     let t = ((target - arcs[k - 1]) / (arcs[k] - arcs[k - 1])).clamp(0.0, 1.0);
-    let centre = line.points[k - 1] + (line.points[k] - line.points[k - 1]) * t;
+    let mut centre = line.points[k - 1] + (line.points[k] - line.points[k - 1]) * t;
     let radius = line.radii[k - 1] + (line.radii[k] - line.radii[k - 1]) * t;
-    // The segment up to the centre, and from it (no repeated point at either side of the cut).
+    // A centre on a point of the segment is that point (no repeated point either side of the cut).
+    let on_previous = (centre - line.points[k - 1]).norm() <= SAME_POINT_MM;
+    let on_next = !on_previous && (line.points[k] - centre).norm() <= SAME_POINT_MM;
+    if on_previous {
+        centre = line.points[k - 1];
+    } else if on_next {
+        centre = line.points[k];
+    }
+    // The segment up to the centre, and from it.
     let mut head = Line { points: line.points[..k].to_vec(), radii: line.radii[..k].to_vec(), normals: None };
-    if t > 0.0 {
+    if !on_previous {
         head.points.push(centre);
         head.radii.push(radius);
     }
-    let skip = if (line.points[k] - centre).norm() > 0.0 { k } else { k + 1 };
+    let skip = if on_next { k + 1 } else { k };
     let shift = centre - node.point;
     let blend = (BLEND_MOVES * shift.norm()).max(2.0 * node.radius);
     for &d in daughters {
@@ -232,6 +240,9 @@ fn recentre_merged(node: &mut Node, edges: &mut [Edge], into: usize, daughters: 
     node.point = centre;
     node.radius = radius;
 }
+
+/// Points closer than this (mm) are one (as the centerline reader drops repeated points).
+const SAME_POINT_MM: f64 = 1e-9;
 
 /// Length over which a merged junction's other daughters bend to its new centre, in multiples of
 /// the move (at least twice the junction's radius).
