@@ -546,9 +546,9 @@ enum Mobility {
 /// that improves the worst lumen element around it, or else (`pattern_search`) by the best of
 /// small moves along the axes. Fold (page) nodes move only when `build_volume` was asked to
 /// move the pages; being shared by the slots around them, they keep the junction conformal
-/// either way. Sequential, so the result does not depend on
-/// the thread count. Only lumen elements count: `build_volume` grows the wall again from the
-/// surface once its nodes have slid.
+/// either way. Sequential, so the result does not depend on the thread count. Only the elements
+/// given count: the lumen's (`build_volume` grows the wall again from the surface once its
+/// nodes have slid), or a junction wall's when its own nodes move ([`Mobility::AcrossGrowth`]).
 fn improve_junction_nodes(
     nodes: &mut [Point3<f64>],
     lumen: &[Hex],
