@@ -298,9 +298,8 @@ fn synthetic_junction_sweep() {
 }
 
 /// Configurations of the sweep below the bars or refused today (the T at 4:1 at 30, 45 and 60
-/// degrees, the T at 2:1 at 30 degrees); the closing note lists them. A regression raises the
-/// count.
-const MAX_SWEEP_FAILURES: usize = 4;
+/// degrees); the closing note lists them. A regression raises the count.
+const MAX_SWEEP_FAILURES: usize = 3;
 
 /// Two side branches a couple of parent radii apart (as the arch's branches leave the aorta):
 /// the parent's segment between their junctions is too short for a transition and ordinary
@@ -382,9 +381,10 @@ fn real_branched_vessels_mesh_within_the_bars() {
 /// junctions' blocks would overlap. vesselhex merges them into one junction of four branches
 /// (ascending aorta, arch, brachiocephalic trunk, left common carotid) centred on the trunk,
 /// with the given centerlines at the coarse and medium presets and with its own (the bare
-/// surface, issue 8). The mesh is conformal, its triads continuous, every element positive, the
-/// lumen within the bars; the wall is not yet at both presets (coarse: its mean; medium: its
-/// worst element, at the left subclavian's junction; the closing note gives the figures).
+/// surface, issue 8). The mesh is conformal, its triads continuous, its worst element, its lumen
+/// skew and its surface fidelity within the bars at both presets, and its wall mean at the medium
+/// one (at the coarse one the carotid's short, funnelled wall keeps it below; the closing note
+/// gives the figures).
 #[test]
 fn aortic_arch_meshes_with_its_overlapping_junctions_merged() {
     let Some(v) = vessels_dir() else { return };
@@ -393,11 +393,10 @@ fn aortic_arch_meshes_with_its_overlapping_junctions_merged() {
         let name = format!("gmsh_aortic_arch {preset:?}");
         let m = mesh(&d.join("aorta.stl"), &d.join("centerlinesAORTA.vtk"), LengthUnit::M, &MeshConfig::preset(preset));
         let f = check_all(&name, &m);
-        let mesh = &m.mesh;
-        let lumen_min = mesh.lumen_range().map(|e| mesh.quality[e].scaled_jacobian).fold(f64::INFINITY, f64::min);
-        eprintln!("{name}: lumen min SJ {lumen_min:.3}");
-        assert!(f.min_sj > 0.0, "{name}: an element is inverted ({:.3})", f.min_sj);
-        assert!(lumen_min >= MIN_SCALED_JACOBIAN, "{name}: lumen min scaled Jacobian {lumen_min:.3}");
+        if preset == Preset::Medium {
+            assert_bars(&name, &f);
+        }
+        assert!(f.min_sj >= MIN_SCALED_JACOBIAN, "{name}: min scaled Jacobian {:.3}", f.min_sj);
         assert!(f.lumen_mean_skew <= MAX_LUMEN_MEAN_SKEW, "{name}: lumen mean skew {:.3}", f.lumen_mean_skew);
         assert!(
             f.node_to_surface_um <= MAX_NODE_TO_SURFACE_UM,
