@@ -146,6 +146,8 @@ type FinishedVolume = (VesselMesh, Vec<Option<usize>>, JunctionVariant, (f64, f6
 /// BRANCHING.md §6's target for the worst junction element; below it, the junction finishes
 /// are tried again with the pattern search.
 const JUNCTION_TARGET_SJ: f64 = 0.3;
+/// The bar on the scaled Jacobian, below which a junction's wall is optimised.
+const WALL_BAR_SJ: f64 = 0.2;
 
 /// Least stretch of ordinary sections between two junctions' transitions, in end radii (the
 /// sum of the branch's two end radii); less, and the branch is a bridge.
@@ -435,18 +437,37 @@ pub fn mesh_tree(
     // search (the synthetic Y at 30 degrees and 4:1: 0.190 -> 0.293; it can also lose, hence
     // both are kept in the running).
     if !junctions.is_empty() && built[best_of(&built)].3 .0 < JUNCTION_TARGET_SJ {
-        let mut searched: Vec<_> =
+        let searched: Vec<_> =
             optimisations.iter().map(|&o| JunctionOptimisation { pattern_search: true, ..o }).collect();
-        // ... and with the pages moving as well (their rims sliding), which gives a small
-        // branch's fold room where flat pages span the whole spine: the synthetic Y at 60
-        // degrees and 4:1 goes from 0.234 to 0.350, at 90 degrees from 0.098 to 0.134.
-        for pattern_search in [false, true] {
-            searched.push(JunctionOptimisation { slide_surface_nodes: true, pattern_search, move_pages: true });
-        }
         built.extend(build_all(&searched));
     }
+    // Still below: with the pages moving as well (their rims sliding), which gives a small
+    // branch's fold room where flat pages span the whole spine (the synthetic Y at 60 degrees and
+    // 4:1 goes from 0.234 to 0.350). Only then: bent pages reshape the crotch's lumen faces,
+    // which inflate unevenly (simvascular_demo_aortoiliac at coarse, whose junction the pattern
+    // search already takes past the target: a crotch face's area shrank by 24 % under pressure).
+    if !junctions.is_empty() && built[best_of(&built)].3 .0 < JUNCTION_TARGET_SJ {
+        let pages: Vec<_> = [false, true]
+            .map(|pattern_search| JunctionOptimisation {
+                slide_surface_nodes: true,
+                pattern_search,
+                move_pages: true,
+                ..Default::default()
+            })
+            .to_vec();
+        built.extend(build_all(&pages));
+    }
     let chosen = best_of(&built);
-    let (mut mesh, junction_of, junction_variant, _) = built.into_iter().nth(chosen).expect("a variant");
+    let (mut mesh, junction_of, mut junction_variant, worst_found) = built.into_iter().nth(chosen).expect("a variant");
+    // The variant kept, with its junction walls optimised where one is below the bar. After the
+    // choice, not before: optimised walls would change which variant is kept (on
+    // simvascular_demo_aortoiliac at coarse, one whose crotch faces inflate unevenly).
+    if worst_found.1 < WALL_BAR_SJ {
+        let optimisation = JunctionOptimisation { improve_walls: true, ..junction_variant.optimisation };
+        let (meshes, _) = build_volume(&inputs, optimisation, &[junction_variant.wall_along_rays]);
+        mesh = meshes.into_iter().next().expect("one wall asked for");
+        junction_variant.optimisation = optimisation;
+    }
 
     progress.stage("annotation");
     annotate(&mut mesh);
