@@ -406,8 +406,8 @@ pub fn build_volume(
     // Where a junction's wall has an element below the bar (the lumen's optimisation does not
     // see the wall), its nodes move across their growth directions, so the wall keeps its
     // thickness, to raise the worst wall element (asked for by `improve_walls`, on the finish the
-    // caller keeps). gmsh_aortic_arch at medium: 0.116 -> 0.216. Walls above the bar stay as grown (raising their worst
-    // element costs their mean a little).
+    // caller keeps). gmsh_aortic_arch at medium: 0.116 -> 0.216. Walls above the bar stay as
+    // grown (raising their worst element costs their mean a little).
     let junction_wall: Vec<Hex> =
         (0..hexes.len()).filter(|&e| regions[e].is_wall() && junction_of[e].is_some()).map(|e| hexes[e]).collect();
     let wall_below_bar = |nodes: &[Point3<f64>]| {
