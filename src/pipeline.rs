@@ -146,8 +146,6 @@ type FinishedVolume = (VesselMesh, Vec<Option<usize>>, JunctionVariant, (f64, f6
 /// BRANCHING.md §6's target for the worst junction element; below it, the junction finishes
 /// are tried again with the pattern search.
 const JUNCTION_TARGET_SJ: f64 = 0.3;
-/// The bar on the scaled Jacobian, below which a junction's wall is optimised.
-const WALL_BAR_SJ: f64 = 0.2;
 
 /// Least stretch of ordinary sections between two junctions' transitions, in end radii (the
 /// sum of the branch's two end radii); less, and the branch is a bridge.
@@ -462,7 +460,7 @@ pub fn mesh_tree(
     // The variant kept, with its junction walls optimised where one is below the bar. After the
     // choice, not before: optimised walls would change which variant is kept (on
     // simvascular_demo_aortoiliac at coarse, one whose crotch faces inflate unevenly).
-    if worst_found.1 < WALL_BAR_SJ {
+    if worst_found.1 < crate::volume::QUALITY_BAR_SJ {
         let optimisation = JunctionOptimisation { improve_walls: true, ..junction_variant.optimisation };
         let (meshes, _) = build_volume(&inputs, optimisation, &[junction_variant.wall_along_rays]);
         mesh = meshes.into_iter().next().expect("one wall asked for");

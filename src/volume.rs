@@ -133,12 +133,11 @@ pub fn build_volume(
             let mut ids = Vec::with_capacity(core_count + r_cells * m);
             // A folded section's nodes are the pages' (pooled: one node whichever slot adds it,
             // with the same mobility), so moving them keeps the junction conformal.
-            let section_movable = sec.in_junction && (fold.is_none() || optimisation.move_pages);
-            let inner_movable = section_movable;
+            let inner_movable = sec.in_junction && (fold.is_none() || optimisation.move_pages);
             // A vessel end's section stays as it is (its nodes are the end's sets and plane).
             let vessel_end = (i == 0 && !matches!(pb.start, BranchEnd::Fold(_)))
                 || (i == last && !matches!(pb.end, BranchEnd::Fold(_)));
-            let surface_movable = optimisation.slide_surface_nodes && section_movable && !vessel_end;
+            let surface_movable = optimisation.slide_surface_nodes && inner_movable && !vessel_end;
             let in_junction = sec.in_junction;
             let mut add =
                 |key: Option<FoldKey>, p: Point3<f64>, radius: f64, ray: Vector3<f64>, free: Mobility| -> u32 {
@@ -408,12 +407,14 @@ pub fn build_volume(
     // thickness, to raise the worst wall element (asked for by `improve_walls`, on the finish the
     // caller keeps). gmsh_aortic_arch at medium: 0.116 -> 0.216. Walls above the bar stay as
     // grown (raising their worst element costs their mean a little).
-    let junction_wall: Vec<Hex> =
-        (0..hexes.len()).filter(|&e| regions[e].is_wall() && junction_of[e].is_some()).map(|e| hexes[e]).collect();
+    let junction_wall: Vec<Hex> = if optimisation.improve_walls {
+        (0..hexes.len()).filter(|&e| regions[e].is_wall() && junction_of[e].is_some()).map(|e| hexes[e]).collect()
+    } else {
+        Vec::new()
+    };
     let wall_below_bar = |nodes: &[Point3<f64>]| {
         junction_wall.iter().any(|h| {
-            crate::quality::scaled_jacobian_unless_below(&h.map(|n| nodes[n as usize]), EXTRA_SWEEPS_BELOW)
-                < EXTRA_SWEEPS_BELOW
+            crate::quality::scaled_jacobian_unless_below(&h.map(|n| nodes[n as usize]), QUALITY_BAR_SJ) < QUALITY_BAR_SJ
         })
     };
     let improve_wall = |nodes: &mut [Point3<f64>], dirs: &[Vector3<f64>]| {
@@ -498,15 +499,16 @@ pub fn build_volume(
 
 /// Sweeps of the junction node optimisation.
 const OPTIMISATION_SWEEPS: usize = 10;
-/// Where an element stays below [`EXTRA_SWEEPS_BELOW`] after those, the optimisation goes on up
+/// Where an element stays below [`QUALITY_BAR_SJ`] after those, the optimisation goes on up
 /// to this many sweeps (or until no node moves): gmsh_aortic_arch's left common carotid, a fifth
 /// of its junction's radius, funnels into a fold the whole spine high; after ten sweeps its
 /// funnel is inverted at the medium preset wherever the junction is centred, after thirty it is
 /// valid (lumen min 0.201; at the coarse preset 0.173 -> 0.207). The vessels meshing within the
 /// bars never get there, so they cost no more.
 const MAX_OPTIMISATION_SWEEPS: usize = 30;
-/// The bar on the scaled Jacobian.
-const EXTRA_SWEEPS_BELOW: f64 = 0.2;
+/// The bar on the scaled Jacobian: below it, junctions get more sweeps and (when asked)
+/// their walls are optimised.
+pub(crate) const QUALITY_BAR_SJ: f64 = 0.2;
 
 /// How a branched vessel's junctions are finished; the caller builds the variants and keeps
 /// the best (see `pipeline::mesh_tree`).
@@ -642,7 +644,7 @@ fn improve_junction_nodes(
         v
     };
     for sweep in 0..MAX_OPTIMISATION_SWEEPS {
-        if sweep >= OPTIMISATION_SWEEPS && worst(nodes, &all_incident, EXTRA_SWEEPS_BELOW) > EXTRA_SWEEPS_BELOW {
+        if sweep >= OPTIMISATION_SWEEPS && worst(nodes, &all_incident, QUALITY_BAR_SJ) > QUALITY_BAR_SJ {
             break;
         }
         let moves_before = moves;

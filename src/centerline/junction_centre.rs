@@ -17,8 +17,8 @@ const GAIN: f64 = 1.15;
 /// The search stays within this many file radii of the file's centre.
 const SEARCH_RADII: f64 = 1.5;
 /// Length over which a branch bends to the moved centre, in multiples of the move (at least
-/// twice the junction radius).
-const BLEND_MOVES: f64 = 3.0;
+/// twice the junction radius); a merged junction's daughters bend the same way.
+pub(super) const BLEND_MOVES: f64 = 3.0;
 
 /// Moves every junction whose file centre sits off the middle of the lumen (see the module).
 pub(crate) fn centre_junctions(tree: &mut RootedTree, surface: &LumenSurface) {

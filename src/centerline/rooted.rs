@@ -222,7 +222,7 @@ fn recentre_merged(node: &mut Node, edges: &mut [Edge], into: usize, daughters: 
     }
     let skip = if on_next { k + 1 } else { k };
     let shift = centre - node.point;
-    let blend = (BLEND_MOVES * shift.norm()).max(2.0 * node.radius);
+    let blend = (super::junction_centre::BLEND_MOVES * shift.norm()).max(2.0 * node.radius);
     for &d in daughters {
         let l = &mut edges[d].line;
         if l.points.len() >= line.points.len() && l.points[..line.points.len()] == line.points[..] {
@@ -243,10 +243,6 @@ fn recentre_merged(node: &mut Node, edges: &mut [Edge], into: usize, daughters: 
 
 /// Points closer than this (mm) are one (as the centerline reader drops repeated points).
 const SAME_POINT_MM: f64 = 1e-9;
-
-/// Length over which a merged junction's other daughters bend to its new centre, in multiples of
-/// the move (at least twice the junction's radius).
-const BLEND_MOVES: f64 = 3.0;
 
 /// Two daughters of a node that run together (within [`APART`] radii of each other) for at
 /// least this many radii from it share a trunk.
