@@ -59,9 +59,9 @@ pub struct JunctionReport {
     /// Branches counter-clockwise about the spine, the parent first among them.
     pub branches: Vec<String>,
     pub spine_axis: [f64; 3],
-    /// How the wall grew from the junction's lumen-surface nodes: `normal` or `ray` (the
-    /// better of the two, see README).
-    pub wall_growth: crate::config::WallGrowth,
+    /// How the wall grew from the junction's lumen-surface nodes: `smoothed_normal`, `normal`
+    /// or `ray` (the best of them, see README).
+    pub wall_growth: crate::volume::JunctionWall,
     /// Whether the transitions' lumen-surface nodes were slid on the triangles to raise the
     /// worst element (see README).
     pub surface_nodes_slid: bool,
