@@ -9,6 +9,7 @@ use std::process::Command;
 use vesselhex::config::MeshConfig;
 use vesselhex::mesh::{sets, VesselMesh};
 use vesselhex::testing::straight_tube_mesh;
+use vesselhex::units::LengthUnit;
 use vesselhex::writers::inp::{ElementType, MaterialModel, MMHG_IN_MPA};
 use vesselhex::writers::{calculix::write_calculix, WriteOptions};
 
@@ -498,53 +499,69 @@ fn real_branched_vessels_decks_solve() {
     }
     let Some(v) = common::vessels_dir() else { return };
     for (case, surface, centerlines, unit) in common::REAL_BIFURCATIONS {
-        let d = v.join(case);
-        let mesh = common::mesh_files_in(
-            &d.join(surface),
-            &d.join(centerlines),
-            unit,
-            &MeshConfig::preset(vesselhex::config::Preset::Coarse),
-        );
-        assert!(mesh.ends.len() >= 3, "{case}: not branched");
-        let run = solve(&mesh, &WriteOptions::default(), case);
-        let disp = frd_displacements(&run.dir);
-        let motion = lumen_normal_motion(&mesh, &disp);
-        // The branch of each lumen-surface node: that of an intima element on it.
-        let mut branch_of_node = std::collections::HashMap::new();
-        for e in mesh.region_range(vesselhex::mesh::Region::Intima) {
-            for n in mesh.hexes[e] {
-                branch_of_node.entry(n).or_insert(mesh.branch_of[e] as usize);
-            }
-        }
-        let mut per_branch = vec![(0.0, 0usize); mesh.branch_names.len()];
-        for &(i, un) in &motion {
-            let b = &mut per_branch[branch_of_node[&i]];
-            b.0 += un;
-            b.1 += 1;
-        }
-        let inward = motion.iter().filter(|m| m.1 <= 0.0).count();
-        // Area stretch of every lumen-surface face (the intima's inner faces).
-        let moved = |n: u32| mesh.nodes[n as usize] + nalgebra::Vector3::from(disp[&(n as u64 + 1)]);
-        let mut stretch: Vec<f64> = mesh.face_sets[sets::WALL_LUMEN_FACES]
-            .iter()
-            .map(|f| {
-                let q = vesselhex::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
-                let before = vesselhex::mesh::quad_area_vector(q.map(|n| mesh.nodes[n as usize])).norm();
-                vesselhex::mesh::quad_area_vector(q.map(moved)).norm() / before
-            })
-            .collect();
-        stretch.sort_by(f64::total_cmp);
-        let (least, median, most) = (stretch[0], stretch[stretch.len() / 2], stretch[stretch.len() - 1]);
-        eprintln!(
-            "{case}: {} lumen nodes, {inward} move inwards; mean u.n per branch {:?} mm; lumen face area \
-             stretch {least:.3} / {median:.3} / {most:.3} (least / median / most)",
-            motion.len(),
-            per_branch.iter().map(|b| format!("{:.3e}", b.0 / b.1 as f64)).collect::<Vec<_>>(),
-        );
-        for (b, (sum, count)) in per_branch.iter().enumerate() {
-            assert!(*count > 0 && *sum > 0.0, "{case}: branch {} does not open", mesh.branch_names[b]);
-        }
-        assert!(median > 1.0, "{case}: the lumen surface does not stretch");
-        assert!(least > 0.9 && most < 1.5, "{case}: lumen face area stretch from {least:.3} to {most:.3}");
+        assert_branched_deck_solves(&v, case, surface, centerlines, unit);
     }
+}
+
+/// gmsh_aortic_arch (its merged junction of four branches, its wall along the normals in the
+/// carotid's funnel) likewise.
+#[test]
+fn aortic_arch_deck_solves() {
+    if !ccx_available() {
+        return;
+    }
+    let Some(v) = common::vessels_dir() else { return };
+    let (case, surface, centerlines, unit) = common::GMSH_AORTIC_ARCH;
+    assert_branched_deck_solves(&v, case, surface, centerlines, unit);
+}
+
+fn assert_branched_deck_solves(vessels: &Path, case: &str, surface: &str, centerlines: &str, unit: LengthUnit) {
+    let d = vessels.join(case);
+    let mesh = common::mesh_files_in(
+        &d.join(surface),
+        &d.join(centerlines),
+        unit,
+        &MeshConfig::preset(vesselhex::config::Preset::Coarse),
+    );
+    assert!(mesh.ends.len() >= 3, "{case}: not branched");
+    let run = solve(&mesh, &WriteOptions::default(), case);
+    let disp = frd_displacements(&run.dir);
+    let motion = lumen_normal_motion(&mesh, &disp);
+    // The branch of each lumen-surface node: that of an intima element on it.
+    let mut branch_of_node = std::collections::HashMap::new();
+    for e in mesh.region_range(vesselhex::mesh::Region::Intima) {
+        for n in mesh.hexes[e] {
+            branch_of_node.entry(n).or_insert(mesh.branch_of[e] as usize);
+        }
+    }
+    let mut per_branch = vec![(0.0, 0usize); mesh.branch_names.len()];
+    for &(i, un) in &motion {
+        let b = &mut per_branch[branch_of_node[&i]];
+        b.0 += un;
+        b.1 += 1;
+    }
+    let inward = motion.iter().filter(|m| m.1 <= 0.0).count();
+    // Area stretch of every lumen-surface face (the intima's inner faces).
+    let moved = |n: u32| mesh.nodes[n as usize] + nalgebra::Vector3::from(disp[&(n as u64 + 1)]);
+    let mut stretch: Vec<f64> = mesh.face_sets[sets::WALL_LUMEN_FACES]
+        .iter()
+        .map(|f| {
+            let q = vesselhex::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
+            let before = vesselhex::mesh::quad_area_vector(q.map(|n| mesh.nodes[n as usize])).norm();
+            vesselhex::mesh::quad_area_vector(q.map(moved)).norm() / before
+        })
+        .collect();
+    stretch.sort_by(f64::total_cmp);
+    let (least, median, most) = (stretch[0], stretch[stretch.len() / 2], stretch[stretch.len() - 1]);
+    eprintln!(
+        "{case}: {} lumen nodes, {inward} move inwards; mean u.n per branch {:?} mm; lumen face area \
+         stretch {least:.3} / {median:.3} / {most:.3} (least / median / most)",
+        motion.len(),
+        per_branch.iter().map(|b| format!("{:.3e}", b.0 / b.1 as f64)).collect::<Vec<_>>(),
+    );
+    for (b, (sum, count)) in per_branch.iter().enumerate() {
+        assert!(*count > 0 && *sum > 0.0, "{case}: branch {} does not open", mesh.branch_names[b]);
+    }
+    assert!(median > 1.0, "{case}: the lumen surface does not stretch");
+    assert!(least > 0.9 && most < 1.5, "{case}: lumen face area stretch from {least:.3} to {most:.3}");
 }

@@ -734,6 +734,30 @@ fn checkmesh_accepts_branched_vessels() {
     }
 }
 
+/// Issue 7's real branched vessels with their given centerlines (the aorto-iliac, SimVascular and
+/// carotid bifurcations and the aortic arch), at the coarse and medium presets: checkMesh says
+/// `Mesh OK.` with no `***` line.
+#[test]
+fn checkmesh_accepts_the_real_branched_vessels_at_both_presets() {
+    if !openfoam_available("checkmesh_accepts_the_real_branched_vessels_at_both_presets") {
+        return;
+    }
+    let Some(v) = common::vessels_dir() else { return };
+    for (case, surface, centerlines, unit) in common::REAL_BIFURCATIONS.into_iter().chain([common::GMSH_AORTIC_ARCH]) {
+        for preset in [Preset::Coarse, Preset::Medium] {
+            let d = v.join(case);
+            let mesh = common::mesh_files_in(&d.join(surface), &d.join(centerlines), unit, &MeshConfig::preset(preset));
+            let name = format!("{case}-{preset:?}");
+            let dir = scratch(&name);
+            let case_dir = write(&mesh, "openfoam", &WriteOptions::default(), &dir);
+            let summary = check_mesh(&case_dir, &[]);
+            assert_eq!(stat(&summary, "hexahedra"), mesh.lumen_range().len(), "{name}: {summary:?}");
+            eprintln!("{name}: checkMesh Mesh OK; {}", summary.join("; "));
+            cleanup(&dir);
+        }
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Flow through branched vessels
 

@@ -232,6 +232,11 @@ pub const REAL_BIFURCATIONS: [(&str, &str, &str, LengthUnit); 3] = [
     ("gmsh_carotid_bifurcation", "carotid.stl", "centerlinesCAROTID.vtk", LengthUnit::M),
 ];
 
+/// gmsh_aortic_arch: (case, surface, centerlines, unit), as in [`REAL_BIFURCATIONS`] (its two
+/// junctions overlap and are merged, see tests/branching.rs).
+pub const GMSH_AORTIC_ARCH: (&str, &str, &str, LengthUnit) =
+    ("gmsh_aortic_arch", "aorta.stl", "centerlinesAORTA.vtk", LengthUnit::M);
+
 /// The real unbranched vessels meshed with `config`: aneurisk_C0092 with its centerline and
 /// vmtk_abdominal_aorta_segment with a derived one.
 pub fn real_unbranched_meshes(vessels: &Path, config: &MeshConfig) -> Vec<(&'static str, VesselMesh)> {
