@@ -433,13 +433,14 @@ pub fn mesh_tree(
         surface: lumen_surface,
     };
     // A junction is finished in four ways (twelve, below the target), and the best is kept (see
-    // FinishQuality), the first of equals in this order. Sliding the transitions' surface nodes on the triangles frees the lumen
-    // where the inner nodes alone cannot (a small branch's funnel: the synthetic Y at 45 degrees
-    // and 4:1 goes from 0.121 to 0.205), but in an acute crotch it can cost the wall more than it
-    // gives the lumen. In an acute crotch the smoothed normals converge and shear the outer wall
-    // layers while the rays, aimed past the crotch, do not; on real surfaces the normals mostly
-    // give the better wall. The wall does not change the optimisation, so each optimised lumen
-    // carries both walls, and a third held in reserve (below).
+    // FinishQuality), the first of equals in this order. Sliding the transitions' surface nodes
+    // on the triangles frees the lumen where the inner nodes alone cannot (a small branch's
+    // funnel: the synthetic Y at 45 degrees and 4:1 goes from 0.121 to 0.205), but in an acute
+    // crotch it can cost the wall more than it gives the lumen. In an acute crotch the smoothed
+    // normals converge and shear the outer wall layers while the rays, aimed past the crotch, do
+    // not; on real surfaces the normals mostly give the better wall. The wall does not change the
+    // optimisation, so each optimised lumen carries both walls, and a third held in reserve
+    // (below).
     let mut optimisations = vec![JunctionOptimisation::default()];
     let mut walls = vec![JunctionWall::SmoothedNormal];
     if !junctions.is_empty() {
