@@ -156,17 +156,25 @@ struct FinishQuality {
 }
 
 impl FinishQuality {
-    /// A whole mesh's figures (its quality annotated): the worst element, the worst wall
-    /// element, the wall mean.
+    /// A whole mesh's figures (its quality annotated).
     fn of_mesh(mesh: &VesselMesh) -> FinishQuality {
         let sj: Vec<f64> = mesh.quality.iter().map(|q| q.scaled_jacobian).collect();
+        FinishQuality::of(mesh, &sj, |_| true)
+    }
+
+    /// The figures from each element's scaled Jacobian: the worst of the elements `judged`, the
+    /// worst of those in the wall, the mean over the wall (summed in element order, whatever the
+    /// thread count).
+    fn of(mesh: &VesselMesh, sj: &[f64], judged: impl Fn(usize) -> bool) -> FinishQuality {
+        let worst = |in_wall: bool| {
+            (0..sj.len())
+                .filter(|&e| judged(e) && (!in_wall || mesh.regions[e].is_wall()))
+                .map(|e| sj[e])
+                .fold(f64::INFINITY, f64::min)
+        };
         let wall = &sj[mesh.wall_range()];
-        let min = |q: &[f64]| q.iter().copied().fold(f64::INFINITY, f64::min);
-        FinishQuality {
-            worst: min(&sj),
-            worst_wall: min(wall),
-            wall_mean: wall.iter().sum::<f64>() / wall.len().max(1) as f64,
-        }
+        let wall_mean = wall.iter().map(|q| q.max(-1.0)).sum::<f64>() / wall.len().max(1) as f64;
+        FinishQuality { worst: worst(false), worst_wall: worst(true), wall_mean }
     }
 
     /// The bars first (a finish meeting them beats one that does not, however much
@@ -449,8 +457,9 @@ pub fn mesh_tree(
             walls.extend([JunctionWall::Ray, JunctionWall::Normal]);
         }
     }
+    // The junctions' elements and the wall are judged (the rest is the same in every finish).
     let judge = |mesh: &VesselMesh, junction_of: &[Option<usize>]| -> FinishQuality {
-        let quality: Vec<f64> = (0..mesh.hexes.len())
+        let sj: Vec<f64> = (0..mesh.hexes.len())
             .into_par_iter()
             .map(|e| {
                 if junction_of[e].is_none() && !mesh.regions[e].is_wall() {
@@ -464,16 +473,7 @@ pub fn mesh_tree(
                 }
             })
             .collect();
-        let in_junctions = |wall: bool| {
-            (0..quality.len())
-                .filter(|&e| junction_of[e].is_some() && (!wall || mesh.regions[e].is_wall()))
-                .map(|e| quality[e])
-                .fold(f64::INFINITY, f64::min)
-        };
-        // Summed in element order, whatever the thread count.
-        let wall = mesh.wall_range();
-        let wall_mean = quality[wall.clone()].iter().map(|q| q.max(-1.0)).sum::<f64>() / wall.len().max(1) as f64;
-        FinishQuality { worst: in_junctions(false), worst_wall: in_junctions(true), wall_mean }
+        FinishQuality::of(mesh, &sj, |e| junction_of[e].is_some())
     };
     // Built side by side; the choice is made in the fixed order above, so it does not depend
     // on the thread count.

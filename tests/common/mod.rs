@@ -58,19 +58,19 @@ pub fn path_str(p: &Path) -> &str {
 
 /// Runs `vesselhex mesh` and returns the parsed report; panics with stderr on failure.
 pub fn mesh_cli(surface: &Path, centerlines: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
-    let mut args = vec![
-        "mesh",
-        "--surface",
-        path_str(surface),
-        "--centerlines",
-        path_str(centerlines),
-        "--output",
-        path_str(out),
-        "--quiet",
-    ];
+    let mut args = vec!["--centerlines", path_str(centerlines)];
+    args.extend_from_slice(extra);
+    mesh_surface_cli(surface, out, &args)
+}
+
+/// Runs `vesselhex mesh --surface SURFACE --output OUT --quiet` with `extra` arguments (without
+/// `--centerlines`, vesselhex computes them) and returns the parsed report; panics with stderr
+/// on failure.
+pub fn mesh_surface_cli(surface: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec!["mesh", "--surface", path_str(surface), "--output", path_str(out), "--quiet"];
     args.extend_from_slice(extra);
     let o = vesselhex(&args);
-    assert!(o.status.success(), "vesselhex failed: {}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{}: vesselhex failed: {}", surface.display(), String::from_utf8_lossy(&o.stderr));
     let text = std::fs::read_to_string(out.join("report.json")).unwrap();
     serde_json::from_str(&text).unwrap()
 }
@@ -114,11 +114,9 @@ pub const EVERY_FORMAT: &str = "vtu,calculix,abaqus,febio,febio-fsi,openfoam,ope
 /// arguments through every writer into `out`, checks that each writer's main file is there, and
 /// returns the parsed report; panics with stderr on failure.
 pub fn mesh_surface_through_every_writer(surface: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
-    let mut args =
-        vec!["mesh", "--surface", path_str(surface), "--formats", EVERY_FORMAT, "--output", path_str(out), "--quiet"];
+    let mut args = vec!["--formats", EVERY_FORMAT];
     args.extend_from_slice(extra);
-    let o = vesselhex(&args);
-    assert!(o.status.success(), "{}: {}", surface.display(), String::from_utf8_lossy(&o.stderr));
+    let report = mesh_surface_cli(surface, out, &args);
     for f in [
         "mesh.vtu",
         "calculix/model.inp",
@@ -130,7 +128,7 @@ pub fn mesh_surface_through_every_writer(surface: &Path, out: &Path, extra: &[&s
     ] {
         assert!(out.join(f).is_file(), "{}: {f} missing", surface.display());
     }
-    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+    report
 }
 
 /// A number of a report, by JSON pointer; panics naming the pointer when it is missing.
