@@ -234,6 +234,9 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<()> {
         reproducible: args.reproducible,
     };
     let report = run(&request)?;
+    for w in &report.warnings {
+        eprintln!("vesselhex: warning: {}", w.message);
+    }
     if !args.quiet {
         eprintln!(
             "vesselhex: {} lumen + {} wall hexes; scaled Jacobian min {:.3} (wall mean {:.3}); lumen skew mean {:.3}; \

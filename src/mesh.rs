@@ -245,6 +245,11 @@ pub fn unit_cube() -> [Point3<f64>; 8] {
     })
 }
 
+/// Centre (mean of the corners) of an element.
+pub fn element_centre(corners: &[Point3<f64>; 8]) -> Point3<f64> {
+    Point3::from(corners.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / 8.0)
+}
+
 /// Centre of face `f` of an element given its corners.
 pub fn face_centre(corners: &[Point3<f64>; 8], f: usize) -> Point3<f64> {
     let t = HEX_FACES[f];

@@ -17,7 +17,9 @@ use crate::mesh::VesselMesh;
 use crate::progress::Progress;
 use crate::projection::{clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
 use crate::quality::Stats;
-use crate::report::{lumen_report, wall_report, BranchReport, InputReport, JunctionReport, Report};
+use crate::report::{
+    bar_warnings, lumen_report, wall_report, BranchReport, InputReport, JunctionReport, Report, Warning,
+};
 use crate::surface::LumenSurface;
 use crate::volume::{
     build_volume, JunctionOptimisation, JunctionVariant, JunctionWall, RadialLevels, VolumeInputs, QUALITY_BAR_SJ,
@@ -272,7 +274,9 @@ fn check_inside(surface: &LumenSurface, tree: &CenterlineTree, centerline_source
         return Err(Error::input(
             centerline_source,
             format!(
-                "the centerline lies outside the lumen surface {} at ({:.3}, {:.3}, {:.3}) mm, {:.2} mm along it                  (winding number {wk:.2}; {outside} of {} probed points are outside): check that the centerline                  belongs to this surface and that both are in the same units and coordinate system",
+                "the centerline lies outside the lumen surface {} at ({:.3}, {:.3}, {:.3}) mm, {:.2} mm along it \
+                 (winding number {wk:.2}; {outside} of {} probed points are outside): check that the centerline \
+                 belongs to this surface and that both are in the same units and coordinate system",
                 surface.source.display(),
                 p.point.x,
                 p.point.y,
@@ -676,10 +680,12 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let mut progress = Progress::new(request.quiet, 9);
     progress.stage("reading");
     let surface = read_surface(&request.surface, config.units)?;
+    let mut warnings = vec![];
     let (centerlines, centerline_path) = match &request.centerlines {
         Some(path) => (read_centerlines(path, request.centerline_units.unwrap_or(config.units))?, path.clone()),
         None => {
             let extraction = crate::centerline_extract::extract_centerlines(&surface, &request.extraction)?;
+            warnings.extend(extraction.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
             (extraction.centerlines, PathBuf::from("(computed from the surface)"))
         }
     };
@@ -693,7 +699,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
         outputs.extend(write(&meshed.mesh, &options, &staging.dir)?);
     }
     progress.finish();
-    let mut report = build_report(&meshed, &surface, &centerline_path, config, &progress.timings);
+    let mut report = build_report(&meshed, &surface, &centerline_path, config, &progress.timings, warnings);
     if request.reproducible {
         report.timings_s.values_mut().for_each(|t| *t = 0.0);
     }
@@ -720,6 +726,7 @@ fn build_report(
     centerline_path: &Path,
     config: &MeshConfig,
     timings: &[(String, f64)],
+    mut warnings: Vec<Warning>,
 ) -> Report {
     let mesh = &meshed.mesh;
     let unit = config.output_units;
@@ -773,6 +780,9 @@ fn build_report(
         })
         .collect();
     let normals_outward = meshed.projected.first().is_none_or(|p| p.normals_outward);
+    let bars = bar_warnings(mesh);
+    let within_bars = bars.is_empty();
+    warnings.extend(bars);
     Report {
         vesselhex_version: env!("CARGO_PKG_VERSION"),
         length_unit: unit,
@@ -791,6 +801,8 @@ fn build_report(
         surface_accuracy: meshed.accuracy.clone(),
         branches,
         junctions,
+        within_bars,
+        warnings,
         timings_s: timings.iter().cloned().collect(),
         outputs: vec![],
         config: config.clone(),

@@ -10,6 +10,17 @@
 //!   max((theta_max - 90) / 90, (90 - theta_min) / 90). 0 for a cube, 1 for a degenerate element;
 //!   CFD practice asks for a mean below 0.4.
 
+/// The quality bars a mesh is promised to meet (checked in [`crate::report::Bars`]): worst
+/// scaled Jacobian, wall mean scaled Jacobian, lumen mean equi-angle skew. FEA practice wants a
+/// wall mean above 0.8 and CFD a lumen skew below 0.4; these are vesselhex's own, tighter.
+pub struct Bars;
+
+impl Bars {
+    pub const MIN_SCALED_JACOBIAN: f64 = 0.2;
+    pub const WALL_MEAN_SCALED_JACOBIAN: f64 = 0.85;
+    pub const LUMEN_MEAN_SKEW: f64 = 0.35;
+}
+
 use crate::mesh::{ElementQuality, HEX_CORNER_NEIGHBOURS, HEX_FACES};
 use nalgebra::{Point3, Vector3};
 

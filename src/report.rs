@@ -2,7 +2,7 @@
 
 use crate::accuracy::SurfaceAccuracy;
 use crate::mesh::{Region, VesselMesh};
-use crate::quality::Stats;
+use crate::quality::{Bars, Stats};
 use crate::units::LengthUnit;
 use indexmap::IndexMap;
 use serde::Serialize;
@@ -98,10 +98,85 @@ pub struct Report {
     pub surface_accuracy: SurfaceAccuracy,
     pub branches: Vec<BranchReport>,
     pub junctions: Vec<JunctionReport>,
+    /// Whether the mesh meets every quality bar ([`Bars`]); when not, `warnings` names the bar
+    /// and the place.
+    pub within_bars: bool,
+    /// What the user should know about a result that was still written: a bar missed, an input
+    /// repaired, a doubt about units. Each is also printed on stderr.
+    pub warnings: Vec<Warning>,
     /// Seconds per stage (zeros with `--reproducible`, so the report is byte-identical).
     pub timings_s: IndexMap<String, f64>,
     pub outputs: Vec<String>,
     pub config: crate::config::MeshConfig,
+}
+
+/// A note on a result that was still written (see [`Report::warnings`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Warning {
+    /// What kind of note, stable for scripts: `quality_bar`, `surface_repaired`, `units`, ...
+    pub kind: &'static str,
+    /// One line naming the figure, the place and, where there is one, the fix.
+    pub message: String,
+}
+
+impl Warning {
+    pub fn new(kind: &'static str, message: impl Into<String>) -> Warning {
+        Warning { kind, message: message.into() }
+    }
+}
+
+/// One warning per quality bar ([`Bars`]) the mesh misses, naming the figure and, for the
+/// worst element, where it is.
+pub fn bar_warnings(mesh: &VesselMesh) -> Vec<Warning> {
+    let mut out = vec![];
+    let lumen = lumen_report(mesh);
+    let wall = wall_report(mesh);
+    if let Some((e, q)) = mesh
+        .quality
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.scaled_jacobian.total_cmp(&b.1.scaled_jacobian))
+        .filter(|(_, q)| q.scaled_jacobian < Bars::MIN_SCALED_JACOBIAN)
+    {
+        let below = mesh.quality.iter().filter(|q| q.scaled_jacobian < Bars::MIN_SCALED_JACOBIAN).count();
+        let c = crate::mesh::element_centre(&mesh.corners(e));
+        out.push(Warning::new(
+            "quality_bar",
+            format!(
+                "minimum scaled Jacobian {:.3} is below the bar {}: element {} ({}, branch {}) near ({:.3}, {:.3}, \
+                 {:.3}) mm, {below} element(s) below",
+                q.scaled_jacobian,
+                Bars::MIN_SCALED_JACOBIAN,
+                e + 1,
+                mesh.regions[e].name(),
+                mesh.branch_of[e],
+                c.x,
+                c.y,
+                c.z
+            ),
+        ));
+    }
+    if wall.all.elements > 0 && wall.all.scaled_jacobian.mean < Bars::WALL_MEAN_SCALED_JACOBIAN {
+        out.push(Warning::new(
+            "quality_bar",
+            format!(
+                "wall mean scaled Jacobian {:.3} is below the bar {}",
+                wall.all.scaled_jacobian.mean,
+                Bars::WALL_MEAN_SCALED_JACOBIAN
+            ),
+        ));
+    }
+    if lumen.elements > 0 && lumen.equiangle_skew.mean > Bars::LUMEN_MEAN_SKEW {
+        out.push(Warning::new(
+            "quality_bar",
+            format!(
+                "lumen mean equi-angle skew {:.3} is above the bar {}",
+                lumen.equiangle_skew.mean,
+                Bars::LUMEN_MEAN_SKEW
+            ),
+        ));
+    }
+    out
 }
 
 fn region_report(mesh: &VesselMesh, range: std::ops::Range<usize>) -> RegionReport {

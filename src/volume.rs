@@ -521,9 +521,9 @@ const STALLED_SWEEPS: usize = 10;
 const STALLED_GAIN: f64 = 0.01;
 /// The bar on the scaled Jacobian: below it, junctions get more sweeps and (when asked)
 /// their walls are optimised.
-pub(crate) const QUALITY_BAR_SJ: f64 = 0.2;
+pub(crate) const QUALITY_BAR_SJ: f64 = crate::quality::Bars::MIN_SCALED_JACOBIAN;
 /// The bar on the wall's mean scaled Jacobian (FEA practice wants a mean above 0.8).
-pub(crate) const WALL_MEAN_BAR_SJ: f64 = 0.85;
+pub(crate) const WALL_MEAN_BAR_SJ: f64 = crate::quality::Bars::WALL_MEAN_SCALED_JACOBIAN;
 
 /// How a branched vessel's junctions are finished; the caller builds the variants and keeps
 /// the best (see `pipeline::mesh_tree`).
