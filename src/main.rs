@@ -150,7 +150,7 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
         point => InletChoice::Nearest(parse_point(point, scale)?),
     };
     let ends = args.ends.iter().map(|e| parse_point(e, scale)).collect::<vesselhex::Result<Vec<_>>>()?;
-    let surface = vesselhex::input::read_surface(&args.surface, units)?;
+    let (surface, hygiene) = vesselhex::input::clean_surface(vesselhex::input::read_surface(&args.surface, units)?)?;
     let extraction = extract_centerlines(&surface, &ExtractOptions { inlet, ends })?;
     write_vtp(&extraction.centerlines, units.from_mm(), &args.output)?;
     let split_tree = match &args.branch_split {
@@ -160,7 +160,7 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
         None => None,
     };
     if !args.quiet {
-        for note in &extraction.notes {
+        for note in hygiene.notes().iter().chain(&extraction.notes) {
             eprintln!("vesselhex: note: {note}");
         }
         for (k, e) in extraction.ends.iter().enumerate() {

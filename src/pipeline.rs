@@ -8,7 +8,7 @@ use crate::centerline::Branch;
 use crate::centerline::{CenterlineTree, ForcedMerge};
 use crate::config::{MeshConfig, WallGrowth};
 use crate::error::{Error, Result};
-use crate::input::{read_centerlines, read_surface, Centerlines, TriangleSurface};
+use crate::input::{clean_surface, read_centerlines, read_surface, Centerlines, HygieneReport, TriangleSurface};
 use crate::junction::{
     allowed_turns, analyse_junctions, branch_core_dims, check_junction_spacing, equal_cells, find_junction_overlap,
     fold_normal, signed_angle, twist_frames, FoldEnd, JunctionGeometry,
@@ -679,8 +679,8 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let staging = Staging::new(&request.output)?;
     let mut progress = Progress::new(request.quiet, 9);
     progress.stage("reading");
-    let surface = read_surface(&request.surface, config.units)?;
-    let mut warnings = vec![];
+    let (surface, hygiene) = clean_surface(read_surface(&request.surface, config.units)?)?;
+    let mut warnings: Vec<Warning> = hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)).collect();
     let (centerlines, centerline_path) = match &request.centerlines {
         Some(path) => (read_centerlines(path, request.centerline_units.unwrap_or(config.units))?, path.clone()),
         None => {
@@ -700,6 +700,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     }
     progress.finish();
     let mut report = build_report(&meshed, &surface, &centerline_path, config, &progress.timings, warnings);
+    report.input.hygiene = hygiene;
     if request.reproducible {
         report.timings_s.values_mut().for_each(|t| *t = 0.0);
     }
@@ -793,6 +794,7 @@ fn build_report(
             units: config.units,
             surface_triangles: surface.triangles.len(),
             surface_orientation: if normals_outward { "outward" } else { "inward" },
+            hygiene: HygieneReport::default(),
         },
         elements: mesh.hexes.len(),
         nodes: mesh.nodes.len(),

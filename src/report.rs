@@ -83,6 +83,8 @@ pub struct InputReport {
     pub surface_triangles: usize,
     /// +1: the surface triangles face out of the lumen; -1: into it.
     pub surface_orientation: &'static str,
+    /// What surface hygiene changed before meshing.
+    pub hygiene: crate::input::HygieneReport,
 }
 
 #[derive(Debug, Clone, Serialize)]

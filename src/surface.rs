@@ -8,7 +8,8 @@ use crate::input::TriangleSurface;
 use nalgebra::{Point3, Vector3};
 use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::Ray;
-use parry3d_f64::shape::{CompositeShapeRef, TriMesh};
+use parry3d_f64::query::PointQuery;
+use parry3d_f64::shape::{CompositeShapeRef, TriMesh, TriMeshFlags};
 use std::path::PathBuf;
 
 /// Where a ray meets the surface.
@@ -137,6 +138,37 @@ impl LumenSurface {
             }
         }
         (lo, hi)
+    }
+}
+
+/// A closed surface whose triangles face out, for inside tests: a point is inside when it lies
+/// behind the angle-weighted pseudo-normal of its closest feature (Baerentzen and Aanaes 2005),
+/// exact for a watertight, consistently oriented surface and local everywhere else (a defect
+/// only misleads the points whose closest feature it is).
+pub struct SolidSurface {
+    trimesh: TriMesh,
+}
+
+impl SolidSurface {
+    /// `triangles` must close the surface and face out of the enclosed volume.
+    pub fn new(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Option<SolidSurface> {
+        let pv = vertices.iter().map(to_p).collect();
+        let trimesh = TriMesh::with_flags(pv, triangles.to_vec(), TriMeshFlags::ORIENTED).ok()?;
+        Some(SolidSurface { trimesh })
+    }
+
+    /// The distance from `p` to the surface when `p` lies inside it.
+    pub fn depth(&self, p: &Point3<f64>) -> Option<f64> {
+        self.depth_within(p, f64::MAX)
+    }
+
+    /// [`SolidSurface::depth`] for a point known to lie within `reach` of the surface (a bound
+    /// that lets the search skip every triangle farther away; `None` also when it does not).
+    pub fn depth_within(&self, p: &Point3<f64>, reach: f64) -> Option<f64> {
+        let q = to_p(p);
+        let proj = self.trimesh.project_local_point_with_max_dist(q, false, reach)?;
+        let d = (proj.point - q).length();
+        proj.is_inside.then_some(d)
     }
 }
 

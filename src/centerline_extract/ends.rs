@@ -1,8 +1,7 @@
 //! Finding a vessel's ends: flat caps (tagged by a cell array, or found as planar discs with a
 //! sharp rim), open boundary loops, and points given by the user.
 
-use super::medial::Ball;
-use super::topology::{boundary_loops, loop_centre_and_area, triangle_neighbours, BOUNDARY, NON_MANIFOLD};
+use crate::input::topology::{boundary_loops, loop_centre_and_area, triangle_neighbours, BOUNDARY, NON_MANIFOLD};
 use nalgebra::{Point3, Vector3};
 use std::collections::BTreeMap;
 
@@ -15,6 +14,9 @@ pub enum EndKind {
     Cap { tag: Option<i64> },
     /// A point given by the user (`--ends`), snapped to the surface.
     Given,
+    /// A rounded or blunt closed end, found as the far tip of a vessel the other ends' paths
+    /// do not reach (see `rounded`).
+    Dome,
 }
 
 /// One end of the vessel, in millimetres.
@@ -35,23 +37,40 @@ const CAP_FLATNESS: f64 = 0.02;
 const CAP_ROUNDNESS: f64 = 0.5;
 /// Triangles grown into one planar region have normals within this angle (cosine).
 const REGION_COS: f64 = 0.9994; // 2 degrees
-/// A found (untagged) cap's rim is sharp: the wall meets it at more than this angle (cosine).
-const RIM_COS: f64 = 0.866; // 30 degrees
 
-/// Triangle index sets of the flat caps: the tag values whose triangles form a flat disc, or,
-/// without such tags, planar regions bounded by one sharp rim.
-pub fn find_caps(
-    vertices: &[Point3<f64>],
-    triangles: &[[u32; 3]],
-    tags: Option<&[i64]>,
-) -> Vec<(Option<i64>, Vec<u32>)> {
+/// A flat region is a cap when its equivalent radius is at least this fraction of the
+/// inscribed ball at its centre (the vessel's radius there); lower than [`END_SPAN`] since a
+/// blunt end's flat part stops short of its rounded rim, and a short stub may narrow to its cap.
+pub const CAP_SPAN: f64 = 0.4;
+/// A cut cap's rim is sharp: every rim edge turns by more than 30 degrees (cosine).
+const RIM_COS: f64 = 0.866;
+
+/// A flat region that may close a vessel: its triangles, the end it would make, and whether
+/// its rim is sharp all around (a cut) or rounded (a blunt end).
+#[derive(Debug, Clone)]
+pub struct Cap {
+    pub triangles: Vec<u32>,
+    pub end: VesselEnd,
+    pub sharp_rim: bool,
+}
+
+/// The flat regions that may close a vessel: the tag values whose triangles form a flat disc
+/// (tagged caps, taken as they are, with a sharp rim), or, without such tags, planar regions
+/// that form a flat, round disc (see [`flat_disc`]), their rims sharp or rounded. Which of them
+/// are ends is for the caller to judge against the vessel behind them.
+pub fn find_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: Option<&[i64]>) -> Vec<Cap> {
+    let disc = |tris: &[u32], tag: Option<i64>, sharp_rim: bool| -> Option<Cap> {
+        let (centre, radius) = flat_disc(vertices, triangles, tris)?;
+        let end = VesselEnd { centre, radius, kind: EndKind::Cap { tag } };
+        Some(Cap { triangles: tris.to_vec(), end, sharp_rim })
+    };
     if let Some(tags) = tags.filter(|t| t.len() == triangles.len()) {
         let mut groups: BTreeMap<i64, Vec<u32>> = BTreeMap::new();
         tags.iter().enumerate().for_each(|(t, &g)| groups.entry(g).or_default().push(t as u32));
-        let caps: Vec<(Option<i64>, Vec<u32>)> = groups
+        let caps: Vec<Cap> = groups
             .into_iter()
-            .filter(|(_, g)| 2 * g.len() < triangles.len() && is_flat_disc(vertices, triangles, g))
-            .map(|(tag, g)| (Some(tag), g))
+            .filter(|(_, g)| 2 * g.len() < triangles.len())
+            .filter_map(|(tag, g)| disc(&g, Some(tag), true))
             .collect();
         if !caps.is_empty() {
             return caps;
@@ -59,8 +78,8 @@ pub fn find_caps(
     }
     planar_regions(vertices, triangles)
         .into_iter()
-        .filter(|r| 2 * r.len() < triangles.len() && is_flat_disc(vertices, triangles, r))
-        .map(|r| (None, r))
+        .filter(|(r, _)| 2 * r.len() < triangles.len())
+        .filter_map(|(r, sharp)| disc(&r, None, sharp))
         .collect()
 }
 
@@ -70,9 +89,9 @@ fn unit_normal(vertices: &[Point3<f64>], t: &[u32; 3]) -> Vector3<f64> {
 }
 
 /// Regions grown across manifold edges from each unvisited triangle (in index order) while the
-/// normals stay within 2 degrees of the seed's, kept when at least 4 triangles and bounded
-/// only by sharp edges (no open edge).
-fn planar_regions(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
+/// normals stay within 2 degrees of the seed's, kept when at least 4 triangles and bounded by
+/// no open edge; each with whether every rim edge is sharp (see [`RIM_COS`]).
+fn planar_regions(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<(Vec<u32>, bool)> {
     let neighbours = triangle_neighbours(triangles);
     let normals: Vec<Vector3<f64>> = triangles.iter().map(|t| unit_normal(vertices, t)).collect();
     let mut region_of = vec![u32::MAX; triangles.len()];
@@ -103,38 +122,35 @@ fn planar_regions(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<Vec<u
     regions
         .into_iter()
         .enumerate()
-        .filter(|(id, r)| {
-            r.len() >= 4
-                && r.iter().all(|&t| {
-                    (0..3).all(|k| {
-                        let u = neighbours[t as usize][k];
-                        u != BOUNDARY
-                            && (u == NON_MANIFOLD
-                                || region_of[u as usize] == *id as u32
-                                || normals[u as usize].dot(&normals[t as usize]).abs() < RIM_COS)
-                    })
+        .filter(|(_, r)| r.len() >= 4 && r.iter().all(|&t| neighbours[t as usize].iter().all(|&u| u != BOUNDARY)))
+        .map(|(id, r)| {
+            let sharp = r.iter().all(|&t| {
+                neighbours[t as usize].iter().all(|&u| {
+                    u == NON_MANIFOLD
+                        || region_of[u as usize] == id as u32
+                        || normals[u as usize].dot(&normals[t as usize]).abs() < RIM_COS
                 })
+            });
+            (r, sharp)
         })
-        .map(|(_, r)| r)
         .collect()
 }
 
-/// Whether the triangles form a flat, roughly round disc bounded by a single loop.
-fn is_flat_disc(vertices: &[Point3<f64>], triangles: &[[u32; 3]], subset: &[u32]) -> bool {
+/// The centre and equivalent radius of the triangles when they form a flat, roughly round disc
+/// bounded by a single loop.
+fn flat_disc(vertices: &[Point3<f64>], triangles: &[[u32; 3]], subset: &[u32]) -> Option<(Point3<f64>, f64)> {
     let tris: Vec<[u32; 3]> = subset.iter().map(|&t| triangles[t as usize]).collect();
     let loops = boundary_loops(&tris);
-    let [lp] = loops.as_slice() else { return false };
+    let [lp] = loops.as_slice() else { return None };
     let (centre, vector_area) = loop_centre_and_area(vertices, lp);
     let area = vector_area.norm();
-    let Some(normal) = vector_area.try_normalize(0.0) else {
-        return false;
-    };
+    let normal = vector_area.try_normalize(0.0)?;
     let radius = (area / std::f64::consts::PI).sqrt();
     let perimeter: f64 =
         (0..lp.len()).map(|i| (vertices[lp[(i + 1) % lp.len()] as usize] - vertices[lp[i] as usize]).norm()).sum();
     let flat =
         tris.iter().flatten().all(|&v| (vertices[v as usize] - centre).dot(&normal).abs() <= CAP_FLATNESS * radius);
-    flat && 4.0 * std::f64::consts::PI * area >= CAP_ROUNDNESS * perimeter * perimeter
+    (flat && 4.0 * std::f64::consts::PI * area >= CAP_ROUNDNESS * perimeter * perimeter).then_some((centre, radius))
 }
 
 /// A boundary loop is a vessel end when it spans the vessel: its equivalent radius is at least
@@ -155,46 +171,38 @@ pub struct Hole {
     pub vessel_radius: f64,
 }
 
-/// The centre of every loop and the unit normal of its plane pointing into the lumen (`lumen_side` = +1 when the loop's right-hand normal does, i.e. when
-/// the triangles face out of the lumen).
-pub fn loop_planes(vertices: &[Point3<f64>], loops: &[Vec<u32>], lumen_side: f64) -> Vec<(Point3<f64>, Vector3<f64>)> {
-    loops
-        .iter()
-        .map(|lp| {
-            let (centre, area) = loop_centre_and_area(vertices, lp);
-            (centre, area.try_normalize(0.0).unwrap_or_default() * lumen_side)
-        })
-        .collect()
-}
-
-/// The ends given by boundary loops, labelled as caps when every loop vertex belonged to a
-/// removed cap, and the loops left out as holes (see [`END_SPAN`]). `balls` holds, for every
-/// loop, the maximal ball tangent at its centre on the lumen's side; a loop without one cannot be
-/// judged and is kept as an end.
+/// The ends given by boundary loops, and the loops left out as holes (see [`END_SPAN`]);
+/// `vessel_radius(centre, radius)` is the inscribed ball's radius at a loop's centre.
 pub fn loop_ends(
     vertices: &[Point3<f64>],
     loops: &[Vec<u32>],
-    cap_tag_of_vertex: &BTreeMap<u32, Option<i64>>,
-    balls: &[Option<Ball>],
+    vessel_radius: impl Fn(&Point3<f64>, f64) -> f64,
 ) -> (Vec<VesselEnd>, Vec<Hole>) {
     let (mut ends, mut holes) = (vec![], vec![]);
-    for (lp, ball) in loops.iter().zip(balls) {
+    for lp in loops {
         let (centre, area) = loop_centre_and_area(vertices, lp);
-        let tags: Vec<Option<&Option<i64>>> = lp.iter().map(|v| cap_tag_of_vertex.get(v)).collect();
-        let kind = match tags.first() {
-            Some(Some(tag)) if tags.iter().all(|t| t.is_some()) => EndKind::Cap { tag: **tag },
-            _ => EndKind::Open,
-        };
         let radius = (area.norm() / std::f64::consts::PI).sqrt();
-        if let Some(b) = ball {
-            if radius < END_SPAN * b.radius {
-                holes.push(Hole { centre, radius, vessel_radius: b.radius });
-                continue;
-            }
+        let vessel = vessel_radius(&centre, radius);
+        if radius < END_SPAN * vessel {
+            holes.push(Hole { centre, radius, vessel_radius: vessel });
+        } else {
+            ends.push(VesselEnd { centre, radius, kind: EndKind::Open });
         }
-        ends.push(VesselEnd { centre, radius, kind });
     }
     (ends, holes)
+}
+
+/// An end whose centre lies within this many radii of a larger end's centre is a piece of it.
+const NESTED: f64 = 1.5;
+
+/// The ends less those whose centre lies near a larger end's (see [`NESTED`]): pieces
+/// of one end (a cap slightly bent into several flat regions, a loop beside its cap) are one
+/// end, the largest piece. Order kept.
+pub fn merge_nested(ends: Vec<VesselEnd>) -> Vec<VesselEnd> {
+    let inside_larger = |e: &VesselEnd| {
+        ends.iter().any(|o| o.radius > e.radius && (o.centre - e.centre).norm() < NESTED * o.radius)
+    };
+    ends.iter().filter(|e| !inside_larger(e)).copied().collect()
 }
 
 /// How the inlet is chosen among the ends.

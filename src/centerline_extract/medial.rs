@@ -172,6 +172,58 @@ impl BallGraph {
         graph
     }
 
+    /// Sizes of the connected components, largest first (diagnostics).
+    pub fn component_sizes(&self) -> Vec<usize> {
+        let n = self.nodes.len();
+        let mut comp = vec![u32::MAX; n];
+        let mut sizes = vec![];
+        for s in 0..n {
+            if comp[s] != u32::MAX {
+                continue;
+            }
+            let id = sizes.len() as u32;
+            let mut stack = vec![s];
+            comp[s] = id;
+            let mut size = 0;
+            while let Some(u) = stack.pop() {
+                size += 1;
+                for &(v, _) in &self.links[u] {
+                    if comp[v as usize] == u32::MAX {
+                        comp[v as usize] = id;
+                        stack.push(v as usize);
+                    }
+                }
+            }
+            sizes.push(size);
+        }
+        sizes.sort_unstable_by(|a, b| b.cmp(a));
+        sizes
+    }
+
+    /// The inscribed ball at a point of the surface or of the lumen: the largest ball that
+    /// holds it or comes within `reach` of it (or within a tenth of its own radius), else the
+    /// ball reaching nearest to it. Its radius is the vessel's there, whatever the surface's
+    /// triangles; `reach` (half a patch's radius, say) keeps a small crease at the point from
+    /// hiding the vessel around it.
+    pub fn pole(&self, p: &Point3<f64>, reach: f64) -> Ball {
+        let gap = |b: &Ball| (b.centre - p).norm() - b.radius;
+        let near =
+            self.nodes.iter().filter(|b| gap(b) <= reach.max(0.1 * b.radius)).max_by(|a, b| a.radius.total_cmp(&b.radius));
+        near.or_else(|| self.nodes.iter().min_by(|a, b| gap(a).total_cmp(&gap(b))))
+            .copied()
+            .unwrap_or(Ball { centre: *p, radius: 0.0 })
+    }
+
+    /// The links of node `n`: (other node, cost).
+    pub fn links(&self, n: usize) -> &[(u32, f64)] {
+        &self.links[n]
+    }
+
+    /// A graph of the given balls and links (both ways, cost per link).
+    pub fn from_parts(nodes: Vec<Ball>, links: Vec<Vec<(u32, f64)>>) -> BallGraph {
+        BallGraph { nodes, links }
+    }
+
     fn link_all(&self) -> Vec<Vec<(u32, f64)>> {
         let mut links = vec![vec![]; self.nodes.len()];
         if self.nodes.is_empty() {
@@ -209,31 +261,37 @@ impl BallGraph {
         (d < LINK_REACH * a.radius.min(b.radius)).then(|| d * 0.5 * (1.0 / a.radius + 1.0 / b.radius))
     }
 
-    /// Adds an end node (a cap centre with its section radius) linked to the nodes whose balls
-    /// hold it within reach, or to the nearest one that holds it, or failing that to the nearby
-    /// nodes whose balls overlap its section's ball.
+    /// Adds an end node: a point on the closed surface (a cap's centre, with the section's
+    /// radius) or inside the lumen (the inscribed ball under a rounded end). It is linked to
+    /// every node whose ball holds it; an end on the surface, which no empty ball holds, to the
+    /// largest ball through it (VMTK's seed: the largest internal tetrahedron at the cap centre),
+    /// or failing that to the ball reaching deepest past it.
     pub fn add_end(&mut self, end: Ball) -> u32 {
         let id = self.nodes.len() as u32;
-        let dist = |b: &Ball| (b.centre - end.centre).norm();
-        let mut order: Vec<usize> = (0..self.nodes.len()).collect();
-        order.sort_by(|&a, &b| dist(&self.nodes[a]).total_cmp(&dist(&self.nodes[b])).then(a.cmp(&b)));
-        let holding: Vec<usize> =
-            order.iter().copied().filter(|&n| dist(&self.nodes[n]) < self.nodes[n].radius).collect();
-        let within: Vec<usize> =
-            holding.iter().copied().filter(|&n| dist(&self.nodes[n]) < LINK_REACH * self.nodes[n].radius).collect();
-        let cost = |n: usize| dist(&self.nodes[n]) * 0.5 * (1.0 / end.radius + 1.0 / self.nodes[n].radius);
-        let chosen: Vec<(usize, f64)> = if !holding.is_empty() {
-            let set = if within.is_empty() { &holding[..1] } else { &within[..] };
-            set.iter().map(|&n| (n, cost(n))).collect()
+        let gap = |n: usize| (self.nodes[n].centre - end.centre).norm() - self.nodes[n].radius;
+        let holding: Vec<usize> = (0..self.nodes.len()).filter(|&n| gap(n) < 0.0).collect();
+        let chosen = if holding.is_empty() {
+            let touch = 1e-6 * end.radius;
+            let through = (0..self.nodes.len())
+                .filter(|&n| gap(n) <= touch)
+                .max_by(|&a, &b| self.nodes[a].radius.total_cmp(&self.nodes[b].radius).then(b.cmp(&a)));
+            let deepest = || (0..self.nodes.len()).min_by(|&a, &b| gap(a).total_cmp(&gap(b)).then(a.cmp(&b)));
+            through.or_else(deepest).into_iter().collect()
         } else {
-            let overlapping = |&&n: &&usize| dist(&self.nodes[n]) < OVERLAP * (end.radius + self.nodes[n].radius);
-            order.iter().take(NEIGHBOURS).filter(overlapping).map(|&n| (n, cost(n))).collect()
+            holding
         };
+        let links: Vec<(u32, f64)> = chosen
+            .iter()
+            .map(|&n| {
+                let length = (self.nodes[n].centre - end.centre).norm();
+                (n as u32, length * 0.5 * (1.0 / end.radius + 1.0 / self.nodes[n].radius))
+            })
+            .collect();
         self.nodes.push(end);
         self.links.push(vec![]);
-        for (n, cost) in chosen {
-            self.links[id as usize].push((n as u32, cost));
-            self.links[n].push((id, cost));
+        for (n, cost) in links {
+            self.links[id as usize].push((n, cost));
+            self.links[n as usize].push((id, cost));
         }
         id
     }

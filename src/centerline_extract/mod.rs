@@ -51,22 +51,25 @@
 
 mod ends;
 mod medial;
+mod rounded;
+mod sampling;
 mod split;
-mod topology;
+
+mod voronoi;
 mod vtp;
 
-pub use ends::{EndKind, Hole, InletChoice, VesselEnd, END_SPAN};
+pub use ends::{EndKind, Hole, InletChoice, VesselEnd, CAP_SPAN, END_SPAN};
+use ends::Cap;
 pub use split::branch_split;
 pub use vtp::{write_branch_split, write_vtp};
 
 use crate::error::{Error, Result};
-use crate::input::{CenterlinePolyline, Centerlines, TriangleSurface};
+use crate::input::{topology, CenterlinePolyline, Centerlines, TriangleSurface};
 use crate::surface::LumenSurface;
 use indexmap::IndexMap;
 use medial::{Ball, BallGraph};
 use nalgebra::Point3;
 use rayon::prelude::*;
-use std::collections::BTreeMap;
 
 /// Output points are spaced by this fraction of the path's small radii.
 const STEP_FRACTION: f64 = 0.1;
@@ -84,6 +87,8 @@ const MARCH_GROWTH: f64 = 0.5;
 const MARCH_PATIENCE: usize = 4;
 /// A given end point outside the surface by more than this many vessel radii there is refused.
 const FAR_FROM_SURFACE: f64 = 2.0;
+/// A blunt face within this many radii (its own or an end's) of an end found is that end's tip.
+const BLUNT_SAME_END: f64 = 3.0;
 /// Two largest ends closer than this ratio make the automatic inlet choice worth a note.
 const AMBIGUOUS_INLET: f64 = 0.9;
 
@@ -128,35 +133,16 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
         notes.push(format!("{flipped} triangles wound against their neighbours were flipped"));
     }
 
-    // Take flat caps off, remembering which vertices they held.
-    let tags = surface.triangle_tags.as_ref().map(|(_, t)| t.as_slice());
-    let caps = ends::find_caps(vertices, &triangles, tags);
-    let mut in_cap = vec![false; triangles.len()];
-    let mut cap_tag_of_vertex = BTreeMap::new();
-    for (tag, tris) in &caps {
-        for &t in tris {
-            in_cap[t as usize] = true;
-            triangles[t as usize].iter().for_each(|&v| {
-                cap_tag_of_vertex.insert(v, *tag);
-            });
-        }
-    }
-    if !caps.is_empty() {
-        notes.push(format!("{} flat caps removed", caps.len()));
-    }
-    let open: Vec<[u32; 3]> = triangles.iter().zip(&in_cap).filter(|(_, c)| !**c).map(|(t, _)| *t).collect();
-    let loops = topology::boundary_loops(&open);
+    // The surface closed by a fan on every boundary loop (ends and holes alike) and facing
+    // out: its inner Voronoi diagram is the medial axis.
+    let loops = topology::boundary_loops(&triangles);
+    let sign = if topology::signed_volume6(vertices, &triangles, &loops) > 0.0 { -1.0 } else { 1.0 };
+    let (closed_vertices, closed_triangles) = topology::close_with_caps(vertices, &triangles, &loops, sign);
+    let (samples, normals) = sampling::resample(&closed_vertices, &closed_triangles);
+    let mut graph = voronoi::medial_graph(&samples, &normals).map_err(|e| Error::input(source, e))?;
 
-    // Inward vertex normals: the winding's sign from the volume closed by fans on every loop.
-    let sign = if topology::signed_volume6(vertices, &open, &loops) > 0.0 { -1.0 } else { 1.0 };
-    let inward: Vec<_> = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
-    let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
-    let (lo, hi) = lumen.bounding_box();
-    let diagonal = (hi - lo).norm();
-    let balls = medial::shrinking_balls(vertices, &inward, diagonal);
-    let planes = ends::loop_planes(vertices, &loops, -sign);
-    let loop_balls = medial::tangent_balls(vertices, &inward, &planes, diagonal);
-    let (mut found, holes) = ends::loop_ends(vertices, &loops, &cap_tag_of_vertex, &loop_balls);
+    // Ends with a boundary: loops and flat caps that span the vessel behind them.
+    let (mut found, holes) = ends::loop_ends(vertices, &loops, |c, radius| graph.pole(c, 0.5 * radius).radius);
     for h in &holes {
         notes.push(format!(
             "a boundary loop at ({:.3}, {:.3}, {:.3}) mm of radius {:.3} mm was left out as a hole in the wall (the \
@@ -164,27 +150,67 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
             h.centre.x, h.centre.y, h.centre.z, h.radius, h.vessel_radius
         ));
     }
-    let mut graph = BallGraph::new(&balls);
+    let tags = surface.triangle_tags.as_ref().map(|(_, t)| t.as_slice());
+    // Flat caps: cut ones (a sharp rim) that span the vessel now; blunt ones (a rounded rim)
+    // only where the paths to every other end leave them uncovered (below).
+    let (caps, blunt): (Vec<Cap>, Vec<Cap>) = ends::find_caps(vertices, &triangles, tags)
+        .into_iter()
+        .filter(|cap| cap.end.radius >= CAP_SPAN * graph.pole(&cap.end.centre, 0.5 * cap.end.radius).radius)
+        .partition(|cap| cap.sharp_rim);
+    if !caps.is_empty() {
+        notes.push(format!("{} flat caps taken off", caps.len()));
+    }
+    let mut in_cap = vec![false; triangles.len()];
+    for cap in &caps {
+        cap.triangles.iter().for_each(|&t| in_cap[t as usize] = true);
+        found.push(cap.end);
+    }
+    found = ends::merge_nested(found);
+    let open: Vec<[u32; 3]> = triangles.iter().zip(&in_cap).filter(|(_, c)| !**c).map(|(t, _)| *t).collect();
+    let inward: Vec<_> = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
+    let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
 
-    // Ends as graph nodes: loop centres are added; given points use their vertex's ball.
+    // Ends as graph nodes; then the points given and the rounded ends.
     let mut end_nodes: Vec<u32> =
         found.iter().map(|e| graph.add_end(Ball { centre: e.centre, radius: e.radius })).collect();
+    let (lo, hi) = lumen.bounding_box();
     for p in &options.ends {
         if found.iter().any(|e| (e.centre - p).norm() < SAME_END * e.radius) {
             continue;
         }
-        let ball = given_end_ball(p, &lumen, &inward, diagonal)?;
+        let ball = given_end_ball(p, &lumen, &inward, (hi - lo).norm())?;
         found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Given });
         end_nodes.push(graph.add_end(ball));
+    }
+    let beside_open_ends = found.iter().any(|e| e.kind == EndKind::Open);
+    for node in rounded::rounded_ends(&graph, &paths_between(&graph, &end_nodes), end_nodes.is_empty(), beside_open_ends) {
+        let ball = graph.nodes[node as usize];
+        found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Dome });
+        end_nodes.push(node);
+    }
+    // Blunt ends: a flat face with a rounded rim that the paths to every other end leave
+    // beyond their balls (a short, wide vessel whose tip the rounded-end search does not take
+    // for a vessel). A flat patch of a wall lies against those balls.
+    // Its faces stay in the surface the radii are measured on: the mesh stops short of it.
+    let covered = paths_between(&graph, &end_nodes);
+    for cap in blunt {
+        let gap = covered.iter().map(|&n| graph.nodes[n as usize]).map(|b| (b.centre - cap.end.centre).norm() - b.radius);
+        let beyond = gap.fold(f64::INFINITY, f64::min) > 0.5 * cap.end.radius;
+        // An end found nearby (a dome's ball lies a radius or two inside its tip) is this one.
+        let near = |e: &VesselEnd| (e.centre - cap.end.centre).norm() < BLUNT_SAME_END * e.radius.max(cap.end.radius);
+        if beyond && !found.iter().any(near) {
+            end_nodes.push(graph.add_end(Ball { centre: cap.end.centre, radius: cap.end.radius }));
+            found.push(cap.end);
+        }
     }
     if found.len() < 2 {
         return Err(Error::input(
             source,
             format!(
-                "found {} vessel end(s) (open boundary loops or flat caps; {} given with --ends), a centerline needs at \
-                 least 2: rounded (dome) caps cannot be detected. Give a point near every end not found, e.g. \
-                 --ends x,y,z --ends x,y,z (in the surface's units), and --inlet x,y,z to pick the inlet",
-                found.len() - options.ends.len().min(found.len()),
+                "found {} vessel end(s) ({} given with --ends), a centerline needs at least 2: the surface holds one \
+                 vessel end or none that vesselhex can recognise (open boundary, flat cap or rounded tip). Give a \
+                 point near every end not found, e.g. --ends x,y,z --ends x,y,z (in the surface's units)",
+                found.len(),
                 options.ends.len()
             ),
         ));
@@ -202,9 +228,41 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
             ));
         }
     }
+    let polylines = trace(&graph, &found, &end_nodes, inlet, &lumen)?;
+    Ok(Extraction { centerlines: Centerlines { polylines, source: source.clone() }, ends: found, inlet, holes, notes })
+}
+
+/// The nodes on the shortest paths from the first of `ends` to the others (all of them when it
+/// is alone; the largest ball when there is none): what the centerlines found so far cover.
+fn paths_between(graph: &BallGraph, ends: &[u32]) -> Vec<u32> {
+    let Some(&first) = ends.first() else {
+        let largest = (0..graph.nodes.len() as u32)
+            .max_by(|&a, &b| graph.nodes[a as usize].radius.total_cmp(&graph.nodes[b as usize].radius).then(b.cmp(&a)));
+        return largest.into_iter().collect();
+    };
+    let (prev, _) = graph.shortest_paths(first);
+    let mut on_paths = vec![first];
+    for &e in &ends[1..] {
+        let mut at = e;
+        while at != u32::MAX && at != first {
+            on_paths.push(at);
+            at = prev[at as usize];
+        }
+    }
+    on_paths
+}
+
+/// One smoothed polyline from the inlet to every other end, along the least-cost paths.
+fn trace(
+    graph: &BallGraph,
+    ends: &[VesselEnd],
+    end_nodes: &[u32],
+    inlet: usize,
+    lumen: &LumenSurface,
+) -> Result<Vec<CenterlinePolyline>> {
     let (prev, _) = graph.shortest_paths(end_nodes[inlet]);
     let mut polylines = vec![];
-    for (k, (end, &node)) in found.iter().zip(&end_nodes).enumerate().filter(|(k, _)| *k != inlet) {
+    for (k, (end, &node)) in ends.iter().zip(end_nodes).enumerate().filter(|(k, _)| *k != inlet) {
         let mut chain = vec![node];
         while let Some(&last) = chain.last() {
             match prev[last as usize] {
@@ -214,7 +272,7 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
         }
         if chain.last() != Some(&end_nodes[inlet]) {
             return Err(Error::input(
-                source,
+                &lumen.source,
                 format!(
                     "end {k} at ({:.3}, {:.3}, {:.3}) mm is not connected to the inlet through the lumen (a pinched or \
                      self-intersecting surface?)",
@@ -224,12 +282,12 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
         }
         chain.reverse();
         let balls: Vec<Ball> = chain.iter().map(|&n| graph.nodes[n as usize]).collect();
-        let (points, radii) = smooth_path(&balls, &lumen);
+        let (points, radii) = smooth_path(&balls, lumen);
         let mut cell_tags = IndexMap::new();
         cell_tags.insert("CenterlineIds".to_string(), polylines.len() as i64);
         polylines.push(CenterlinePolyline { points, radii: Some(radii), normals: None, cell_tags });
     }
-    Ok(Extraction { centerlines: Centerlines { polylines, source: source.clone() }, ends: found, inlet, holes, notes })
+    Ok(polylines)
 }
 
 /// The end ball of a point given by the user: the point is snapped to the surface, then moved
@@ -317,7 +375,8 @@ fn smooth_path(balls: &[Ball], lumen: &LumenSurface) -> (Vec<Point3<f64>>, Vec<f
     let length = s[s.len() - 1];
     let mut radii: Vec<f64> = balls.iter().map(|b| b.radius).collect();
     radii.sort_by(f64::total_cmp);
-    let small = radii[radii.len() / 10];
+    // The path's small radii set the step, but not the few tiny balls by an end's rim.
+    let small = radii[radii.len() / 10].max(0.25 * radii[radii.len() / 2]);
     let n = ((length / (STEP_FRACTION * small)).ceil() as usize).clamp(1, 100_000);
     let at = |t: f64| {
         let i = s.partition_point(|&x| x <= t).clamp(1, s.len().max(2) - 1) - 1;
@@ -347,7 +406,8 @@ fn smooth_path(balls: &[Ball], lumen: &LumenSurface) -> (Vec<Point3<f64>>, Vec<f
                 return p;
             }
             let (mut sum, mut weight) = (nalgebra::Vector3::zeros(), 0.0);
-            for &(tj, pj, _) in samples.iter().filter(|q| (q.0 - t).abs() <= half) {
+            let from = samples.partition_point(|q| q.0 < t - half);
+            for &(tj, pj, _) in samples[from..].iter().take_while(|q| q.0 <= t + half) {
                 let w = (-(tj - t).powi(2) / (2.0 * sigma * sigma)).exp();
                 sum += pj.coords * w;
                 weight += w;

@@ -4,8 +4,10 @@
 mod centerline;
 mod csv;
 mod polydata;
+mod hygiene;
 mod stl;
 mod surface;
+pub mod topology;
 mod vtk_legacy;
 mod vtp;
 
@@ -13,6 +15,7 @@ use crate::error::{Error, Result};
 use crate::units::LengthUnit;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
+pub use hygiene::{clean_surface, HygieneReport};
 use polydata::PolyData;
 use std::path::{Path, PathBuf};
 

@@ -153,6 +153,30 @@ pub fn signed_volume6(vertices: &[Point3<f64>], triangles: &[[u32; 3]], loops: &
     v
 }
 
+/// The surface closed by a fan on every boundary loop (from its length-weighted centre, a new
+/// vertex), wound so that every triangle faces out (`inward_sign` is -1 when the given triangles
+/// already do, +1 when they face in).
+pub fn close_with_caps(
+    vertices: &[Point3<f64>],
+    triangles: &[[u32; 3]],
+    loops: &[Vec<u32>],
+    inward_sign: f64,
+) -> (Vec<Point3<f64>>, Vec<[u32; 3]>) {
+    let mut all = vertices.to_vec();
+    let mut closed = triangles.to_vec();
+    for lp in loops {
+        let (centre, _) = loop_centre_and_area(vertices, lp);
+        let c = all.len() as u32;
+        all.push(centre);
+        let n = lp.len();
+        closed.extend((0..n).map(|i| [lp[(i + 1) % n], lp[i], c]));
+    }
+    if inward_sign > 0.0 {
+        closed.iter_mut().for_each(|t| t.swap(1, 2));
+    }
+    (all, closed)
+}
+
 /// Unit area-weighted vertex normals along the triangles' winding (zero for unused vertices).
 pub fn vertex_normals(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<Vector3<f64>> {
     let mut normals = vec![Vector3::zeros(); vertices.len()];

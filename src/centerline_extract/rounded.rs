@@ -1,0 +1,195 @@
+//! Ends without a boundary: rounded (dome) or blunt caps, found as the parts of the lumen that
+//! the centerlines found so far do not reach.
+//!
+//! The balls of a centerline tree cover its lumen up to the wall. What they leave uncovered is
+//! either a vessel not yet followed (a tube running on beyond them, ending in a dome) or a
+//! pocket of the wall (a bulb, an ostium, a sac, a voxel step). The two differ by how far the
+//! uncovered part reaches compared with its own width: a vessel reaches several of its radii
+//! beyond the balls, a pocket about one. So, repeatedly: take the uncovered region reaching
+//! farthest in its own radii; if it is a vessel, its end is the largest ball at its far tip (the
+//! inscribed ball under the dome, VMTK's pole of the tip), and the path to it joins the tree.
+
+use super::medial::BallGraph;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+/// An uncovered region is a vessel when its lumen reaches at least this many of its widest
+/// ball's radii beyond the covered lumen (a bulb or sac reaches one to two) ...
+pub const VESSEL_REACH: f64 = 3.0;
+/// ... or this many on a surface whose other vessels are cut open: segmentation tools clip
+/// every vessel they follow, so a closed tip there is more likely a sac or a bleb (an elongated
+/// sac reaches three).
+pub const VESSEL_REACH_BESIDE_OPEN_ENDS: f64 = 4.0;
+/// ... and when its end ball is at least this fraction of the covered ball it leaves from (a
+/// step of a voxel surface, or a crease, holds only tiny balls).
+const VESSEL_WIDTH: f64 = 0.25;
+/// At the far tip of a region, the end is the largest ball among those reaching within this
+/// fraction of the largest ball's radius of the farthest reach.
+const TIP_TOLERANCE: f64 = 0.25;
+/// At most this many rounded ends are looked for (a bound on the work, far above real trees).
+const MAX_ENDS: usize = 64;
+
+/// The end nodes of the vessels that `tree` (nodes of the centerlines found so far, or a single
+/// node to start from) does not reach, farthest first.
+///
+/// With no end to start from (`start_alone`: `tree` is a single node of the lumen, not an end),
+/// the first end found (the farthest from that node) becomes the start, and the search begins
+/// again from it alone: the node may lie near another end, whose tip it would hide.
+pub fn rounded_ends(graph: &BallGraph, tree: &[u32], start_alone: bool, beside_open_ends: bool) -> Vec<u32> {
+    let reach = if beside_open_ends { VESSEL_REACH_BESIDE_OPEN_ENDS } else { VESSEL_REACH };
+    let n = graph.nodes.len();
+    let mut in_tree = vec![false; n];
+    tree.iter().for_each(|&t| in_tree[t as usize] = true);
+    let mut ends = vec![];
+    while ends.len() < MAX_ENDS {
+        let gap = gaps(graph, &in_tree);
+        let Some((end, path)) = farthest_uncovered(graph, &gap, reach) else { break };
+        if start_alone && ends.is_empty() {
+            in_tree.iter_mut().for_each(|t| *t = false);
+            in_tree[end as usize] = true;
+        } else {
+            path.iter().for_each(|&p| in_tree[p as usize] = true);
+        }
+        ends.push(end);
+    }
+    ends
+}
+
+/// For each node, how far its centre lies outside the union of the tree's balls (negative
+/// inside); `INFINITY` when farther than the largest tree ball's diameter from every tree node.
+fn gaps(graph: &BallGraph, in_tree: &[bool]) -> Vec<f64> {
+    use kiddo::{ImmutableKdTree, SquaredEuclidean};
+    let members: Vec<usize> = (0..in_tree.len()).filter(|&i| in_tree[i]).collect();
+    let points: Vec<[f64; 3]> = members.iter().map(|&i| graph.nodes[i].centre.into()).collect();
+    let Ok(kd) = ImmutableKdTree::<f64, 3>::new_from_slice(&points) else { return vec![f64::INFINITY; in_tree.len()] };
+    let reach = 2.0 * members.iter().map(|&i| graph.nodes[i].radius).fold(0.0, f64::max);
+    graph
+        .nodes
+        .iter()
+        .map(|b| {
+            kd.query(&b.centre.into())
+                .within::<SquaredEuclidean<f64>>(reach * reach)
+                .execute()
+                .iter()
+                .map(|h| {
+                    let t = graph.nodes[members[h.item as usize]];
+                    (t.centre - b.centre).norm() - t.radius
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect()
+}
+
+#[derive(PartialEq)]
+struct Entry(f64, u32);
+impl Eq for Entry {}
+impl Ord for Entry {
+    fn cmp(&self, o: &Self) -> Ordering {
+        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
+    }
+}
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+/// The most far-reaching uncovered vessel: its end node and the path from the covered lumen to
+/// it, or `None` when every uncovered region is a pocket (reaching less than `vessel_reach` of
+/// its widest radius, see [`VESSEL_REACH`]).
+fn farthest_uncovered(graph: &BallGraph, gap: &[f64], vessel_reach: f64) -> Option<(u32, Vec<u32>)> {
+    let n = graph.nodes.len();
+    let covered: Vec<bool> = gap.iter().map(|&g| g < 0.0).collect();
+    // Distance along the lumen from the covered lumen (the union of the tree's balls): a node
+    // next to it starts at its own gap, the others add straight links through uncovered nodes.
+    let (mut dist, mut prev, mut root) = (vec![f64::INFINITY; n], vec![u32::MAX; n], vec![u32::MAX; n]);
+    let mut heap = BinaryHeap::new();
+    for u in (0..n).filter(|&u| covered[u]) {
+        for &(v, _) in graph.links(u) {
+            let v = v as usize;
+            if !covered[v] && gap[v] < dist[v] {
+                dist[v] = gap[v];
+                prev[v] = u as u32;
+                root[v] = u as u32;
+                heap.push(Entry(gap[v], v as u32));
+            }
+        }
+    }
+    while let Some(Entry(d, u)) = heap.pop() {
+        if d > dist[u as usize] {
+            continue;
+        }
+        for &(v, _) in graph.links(u as usize) {
+            if covered[v as usize] {
+                continue;
+            }
+            let nd = d + (graph.nodes[v as usize].centre - graph.nodes[u as usize].centre).norm();
+            if nd < dist[v as usize] {
+                dist[v as usize] = nd;
+                prev[v as usize] = u;
+                root[v as usize] = root[u as usize];
+                heap.push(Entry(nd, v));
+            }
+        }
+    }
+    let reach = |v: usize| dist[v] + graph.nodes[v].radius;
+    // Uncovered regions as connected groups (by the covered node each was reached from and
+    // the links between them), each judged by its farthest tip.
+    let mut best: Option<(f64, u32)> = None;
+    for region in regions(graph, &covered, &dist) {
+        let tip = region.iter().map(|&v| reach(v)).fold(f64::NEG_INFINITY, f64::max);
+        let widest = region.iter().map(|&v| graph.nodes[v].radius).fold(0.0, f64::max);
+        let end = region
+            .iter()
+            .copied()
+            .filter(|&v| reach(v) >= tip - TIP_TOLERANCE * widest)
+            .max_by(|&a, &b| graph.nodes[a].radius.total_cmp(&graph.nodes[b].radius).then(b.cmp(&a)))?;
+        let r = graph.nodes[end].radius;
+        let from = graph.nodes[root[end] as usize].radius;
+        let significance = reach(end) / widest;
+        if std::env::var_os("VH_DEBUG").is_some() && significance >= 1.0 && region.len() > 20 {
+            let c = graph.nodes[end].centre;
+            eprintln!("region of {} nodes: end ({:.2},{:.2},{:.2}) r {r:.3} reach {:.3} significance {significance:.2} from r {from:.3} widest {widest:.3}", region.len(), c.x, c.y, c.z, reach(end));
+        }
+        if significance >= vessel_reach && r >= VESSEL_WIDTH * from && best.is_none_or(|(s, _)| significance > s) {
+            best = Some((significance, end as u32));
+        }
+    }
+    let (_, end) = best?;
+    let mut path = vec![end];
+    while let Some(&last) = path.last() {
+        match prev[last as usize] {
+            u32::MAX => break,
+            p => path.push(p),
+        }
+    }
+    Some((end, path))
+}
+
+/// The connected groups of reachable uncovered nodes, each sorted, in order of their first node.
+fn regions(graph: &BallGraph, covered: &[bool], dist: &[f64]) -> Vec<Vec<usize>> {
+    let n = graph.nodes.len();
+    let mut seen = vec![false; n];
+    let mut out = vec![];
+    for s in 0..n {
+        if covered[s] || seen[s] || !dist[s].is_finite() {
+            continue;
+        }
+        seen[s] = true;
+        let mut stack = vec![s];
+        let mut region = vec![];
+        while let Some(u) = stack.pop() {
+            region.push(u);
+            for &(v, _) in graph.links(u) {
+                let v = v as usize;
+                if !covered[v] && !seen[v] {
+                    seen[v] = true;
+                    stack.push(v);
+                }
+            }
+        }
+        region.sort_unstable();
+        out.push(region);
+    }
+    out
+}
