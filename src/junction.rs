@@ -249,6 +249,38 @@ pub fn analyse_junctions(tree: &CenterlineTree, surface: &LumenSurface) -> Resul
     tree.junctions.iter().enumerate().map(|(j, _)| analyse_junction(tree, j, surface)).collect()
 }
 
+/// A junction whose analysis fails (its branches cannot be ordered about any axis, say) though
+/// it lies within [`CLOSE_JUNCTIONS`] of its own radius from another junction: the two are one
+/// junction in fact (a wide vessel whose side branches leave close together, the paths to them
+/// parting inside its lumen), to be merged along the branch between them, as overlapping ones
+/// are. The branch joining them (the shortest, if several) and the failure.
+pub fn unanalysable_close_junction(tree: &CenterlineTree, surface: &LumenSurface) -> Option<JunctionOverlap> {
+    for (j, junction) in tree.junctions.iter().enumerate() {
+        let Err(error) = analyse_junction(tree, j, surface) else { continue };
+        let joining = tree
+            .branches
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| b.start_junction.zip(b.end_junction).is_some_and(|(s, e)| s == j || e == j))
+            .filter(|(_, b)| b.length() < CLOSE_JUNCTIONS * junction.radius)
+            .min_by(|a, b| a.1.length().total_cmp(&b.1.length()).then(a.0.cmp(&b.0)));
+        if let Some((b, branch)) = joining {
+            let (s, e) = (branch.start_junction.expect("joins two"), branch.end_junction.expect("joins two"));
+            let place = format!(
+                "the junctions at {} and {}",
+                describe_point(&tree.junctions[s].centre),
+                describe_point(&tree.junctions[e].centre)
+            );
+            return Some(JunctionOverlap { branch: b, place, error });
+        }
+    }
+    None
+}
+
+/// Two junctions this many radii apart (of the one that cannot be analysed alone), or closer,
+/// are one junction in fact.
+const CLOSE_JUNCTIONS: f64 = 2.0;
+
 fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface) -> Result<JunctionGeometry> {
     let junction = &tree.junctions[index];
     let x = junction.centre;

@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use crate::input::{clean_surface, read_centerlines, read_surface, Centerlines, HygieneReport, TriangleSurface};
 use crate::junction::{
     allowed_turns, analyse_junctions, branch_core_dims, check_junction_spacing, equal_cells, find_junction_overlap,
-    fold_normal, signed_angle, twist_frames, FoldEnd, JunctionGeometry,
+    fold_normal, signed_angle, twist_frames, unanalysable_close_junction, FoldEnd, JunctionGeometry,
 };
 use crate::mesh::VesselMesh;
 use crate::progress::Progress;
@@ -301,8 +301,11 @@ pub fn mesh_vessel(
     let lumen_surface = LumenSurface::new(surface)?;
     progress.stage("centerline");
     let tree = CenterlineTree::build(centerlines, &config.centerline, Some(&lumen_surface))?;
-    let junctions = analyse_junctions(&tree, &lumen_surface)?;
-    let Some(overlap) = find_junction_overlap(&tree, &junctions, &lumen_surface) else {
+    let overlap = match analyse_junctions(&tree, &lumen_surface) {
+        Ok(junctions) => find_junction_overlap(&tree, &junctions, &lumen_surface),
+        Err(e) => Some(unanalysable_close_junction(&tree, &lumen_surface).ok_or(e)?),
+    };
+    let Some(overlap) = overlap else {
         return mesh_tree(surface, &lumen_surface, tree, &centerlines.source, config, progress);
     };
     // Two junctions overlap: they become one, centred on the branch between them. Where along

@@ -7,8 +7,8 @@ use crate::error::{Error, Result};
 use crate::input::TriangleSurface;
 use nalgebra::{Point3, Vector3};
 use parry3d_f64::math::Vector as PVec;
-use parry3d_f64::query::Ray;
 use parry3d_f64::query::PointQuery;
+use parry3d_f64::query::Ray;
 use parry3d_f64::shape::{CompositeShapeRef, TriMesh, TriMeshFlags};
 use std::path::PathBuf;
 

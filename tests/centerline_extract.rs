@@ -294,13 +294,27 @@ fn cerebral_aneurysm_reaches_its_three_ends_inside_the_lumen() {
 }
 
 #[test]
-fn cli_writes_centerlines_and_needs_ends_for_rounded_caps() {
+fn cli_finds_rounded_caps_and_takes_given_ends_as_an_override() {
     let dir = temp_dir("cl-cli");
     let out = dir.join("aaa.vtp");
     let (aaa, _) = fixture("aaa");
+    // The AAA's domes (tips at z = -10 and 130, the tube's ends at 0 and 120) are found as ends:
+    // one path along the axis spanning the tube, inside the domes.
     let o = vesselhex(&["centerlines", "--surface", path_str(&aaa), "--output", path_str(&out)]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("found 0 vessel end") && err.contains("--ends"), "{err}");
+    assert!(o.status.success() && err.matches("Dome").count() == 2, "{err}");
+    let axial_span = |out: &Path| {
+        let back = read_centerlines(out, LengthUnit::Mm).unwrap();
+        assert_eq!(back.polylines.len(), 1);
+        let line = &back.polylines[0];
+        let off_axis = line.points.iter().map(|p| p.x.hypot(p.y)).fold(0.0, f64::max);
+        assert!(off_axis < 0.5, "the path leaves the axis by {off_axis} mm");
+        let z: Vec<f64> = line.points.iter().map(|p| p.z).collect();
+        (z.iter().copied().fold(f64::INFINITY, f64::min), z.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+    };
+    let (lo, hi) = axial_span(&out);
+    assert!(lo > -10.0 && lo < 10.0 && hi > 110.0 && hi < 130.0, "path spans z {lo}..{hi}");
+    // Points given near the tips override: the path reaches further into the domes.
     let o = vesselhex(&[
         "centerlines",
         "--surface",
@@ -313,8 +327,8 @@ fn cli_writes_centerlines_and_needs_ends_for_rounded_caps() {
         path_str(&out),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let back = read_centerlines(&out, LengthUnit::Mm).unwrap();
-    assert_eq!(back.polylines.len(), 1);
+    let (given_lo, given_hi) = axial_span(&out);
+    assert!(given_lo <= lo + 1e-9 && given_hi >= hi - 1e-9, "given ends: z {given_lo}..{given_hi}, found {lo}..{hi}");
 }
 
 #[test]

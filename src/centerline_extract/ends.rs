@@ -199,9 +199,8 @@ const NESTED: f64 = 1.5;
 /// of one end (a cap slightly bent into several flat regions, a loop beside its cap) are one
 /// end, the largest piece. Order kept.
 pub fn merge_nested(ends: Vec<VesselEnd>) -> Vec<VesselEnd> {
-    let inside_larger = |e: &VesselEnd| {
-        ends.iter().any(|o| o.radius > e.radius && (o.centre - e.centre).norm() < NESTED * o.radius)
-    };
+    let inside_larger =
+        |e: &VesselEnd| ends.iter().any(|o| o.radius > e.radius && (o.centre - e.centre).norm() < NESTED * o.radius);
     ends.iter().filter(|e| !inside_larger(e)).copied().collect()
 }
 

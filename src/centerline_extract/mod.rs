@@ -58,8 +58,8 @@ mod split;
 mod voronoi;
 mod vtp;
 
-pub use ends::{EndKind, Hole, InletChoice, VesselEnd, CAP_SPAN, END_SPAN};
 use ends::Cap;
+pub use ends::{EndKind, Hole, InletChoice, VesselEnd, CAP_SPAN, END_SPAN};
 pub use split::branch_split;
 pub use vtp::{write_branch_split, write_vtp};
 
@@ -183,7 +183,9 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
         end_nodes.push(graph.add_end(ball));
     }
     let beside_open_ends = found.iter().any(|e| e.kind == EndKind::Open);
-    for node in rounded::rounded_ends(&graph, &paths_between(&graph, &end_nodes), end_nodes.is_empty(), beside_open_ends) {
+    for node in
+        rounded::rounded_ends(&graph, &paths_between(&graph, &end_nodes), end_nodes.is_empty(), beside_open_ends)
+    {
         let ball = graph.nodes[node as usize];
         found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Dome });
         end_nodes.push(node);
@@ -194,7 +196,8 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
     // Its faces stay in the surface the radii are measured on: the mesh stops short of it.
     let covered = paths_between(&graph, &end_nodes);
     for cap in blunt {
-        let gap = covered.iter().map(|&n| graph.nodes[n as usize]).map(|b| (b.centre - cap.end.centre).norm() - b.radius);
+        let gap =
+            covered.iter().map(|&n| graph.nodes[n as usize]).map(|b| (b.centre - cap.end.centre).norm() - b.radius);
         let beyond = gap.fold(f64::INFINITY, f64::min) > 0.5 * cap.end.radius;
         // An end found nearby (a dome's ball lies a radius or two inside its tip) is this one.
         let near = |e: &VesselEnd| (e.centre - cap.end.centre).norm() < BLUNT_SAME_END * e.radius.max(cap.end.radius);
@@ -253,6 +256,11 @@ fn paths_between(graph: &BallGraph, ends: &[u32]) -> Vec<u32> {
 }
 
 /// One smoothed polyline from the inlet to every other end, along the least-cost paths.
+///
+/// The paths form a tree (Dijkstra's from the inlet): they share their nodes up to where the
+/// medial axis branches. Each stretch between branch nodes is smoothed once, its ends held, so
+/// the polylines coincide exactly up to the branch node and part there, as VMTK's do; smoothed
+/// one by one, two paths would start to part a smoothing width before it.
 fn trace(
     graph: &BallGraph,
     ends: &[VesselEnd],
@@ -261,7 +269,7 @@ fn trace(
     lumen: &LumenSurface,
 ) -> Result<Vec<CenterlinePolyline>> {
     let (prev, _) = graph.shortest_paths(end_nodes[inlet]);
-    let mut polylines = vec![];
+    let mut chains = vec![];
     for (k, (end, &node)) in ends.iter().zip(end_nodes).enumerate().filter(|(k, _)| *k != inlet) {
         let mut chain = vec![node];
         while let Some(&last) = chain.last() {
@@ -281,8 +289,39 @@ fn trace(
             ));
         }
         chain.reverse();
-        let balls: Vec<Ball> = chain.iter().map(|&n| graph.nodes[n as usize]).collect();
-        let (points, radii) = smooth_path(&balls, lumen);
+        chains.push(chain);
+    }
+    // Branch nodes: where the chains through a node go on to different nodes (or one ends).
+    let mut next_of: std::collections::HashMap<u32, Vec<u32>> = std::collections::HashMap::new();
+    for chain in &chains {
+        for w in chain.windows(2) {
+            let next = next_of.entry(w[0]).or_default();
+            if !next.contains(&w[1]) {
+                next.push(w[1]);
+            }
+        }
+        next_of.entry(chain[chain.len() - 1]).or_default().push(u32::MAX);
+    }
+    let branches_at = |n: u32| next_of.get(&n).is_some_and(|v| v.len() > 1);
+    let mut smoothed: std::collections::HashMap<(u32, u32), (Vec<Point3<f64>>, Vec<f64>)> =
+        std::collections::HashMap::new();
+    let mut polylines = vec![];
+    for chain in &chains {
+        let (mut points, mut radii): (Vec<Point3<f64>>, Vec<f64>) = (vec![], vec![]);
+        let mut start = 0;
+        for i in 1..chain.len() {
+            if i + 1 < chain.len() && !branches_at(chain[i]) {
+                continue;
+            }
+            let stretch = smoothed.entry((chain[start], chain[i])).or_insert_with(|| {
+                let balls: Vec<Ball> = chain[start..=i].iter().map(|&n| graph.nodes[n as usize]).collect();
+                smooth_path(&balls, lumen)
+            });
+            let skip = usize::from(!points.is_empty());
+            points.extend_from_slice(&stretch.0[skip..]);
+            radii.extend_from_slice(&stretch.1[skip..]);
+            start = i;
+        }
         let mut cell_tags = IndexMap::new();
         cell_tags.insert("CenterlineIds".to_string(), polylines.len() as i64);
         polylines.push(CenterlinePolyline { points, radii: Some(radii), normals: None, cell_tags });

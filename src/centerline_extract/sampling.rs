@@ -5,10 +5,10 @@
 //! vessel is wide, as coarse STL exports have) leave gaps through which the Voronoi diagram of
 //! the vertices alone escapes.
 
-use crate::surface::LumenSurface;
-use rayon::prelude::*;
 use crate::input::topology::vertex_normals;
+use crate::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// Target spacing of the samples, as a fraction of the local radius (about 30 around a section).
@@ -64,12 +64,6 @@ pub fn resample(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> (Vec<Point3
             diagonal
         })
         .collect();
-    if std::env::var_os("VH_DEBUG").is_some() {
-        let mut r = radius.clone();
-        r.sort_by(f64::total_cmp);
-        let q = |f: f64| r[((r.len() - 1) as f64 * f) as usize];
-        eprintln!("sampling radii: p1 {:.3} p5 {:.3} p25 {:.3} p50 {:.3} p75 {:.3} p95 {:.3}", q(0.01), q(0.05), q(0.25), q(0.5), q(0.75), q(0.95));
-    }
     // The median over the vertex and its neighbours: one stray ray does not set the spacing.
     let mut spacing: Vec<f64> = (0..vertices.len())
         .map(|v| {
@@ -103,18 +97,11 @@ pub fn resample(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> (Vec<Point3
             }
         }
     }
-    if std::env::var_os("VH_DEBUG").is_some() {
-        let mut h: Vec<f64> = candidates.iter().map(|c| c.2).collect();
-        h.sort_by(f64::total_cmp);
-        eprintln!("candidates {} (vertices {}), h p5 {:.3} p50 {:.3}", candidates.len(), vertices.len(), h[h.len() / 20], h[h.len() / 2]);
-    }
     thin(&candidates, lo)
 }
 
 fn bounds(points: &[Point3<f64>]) -> (Point3<f64>, Point3<f64>) {
-    points.iter().fold((Point3::from([f64::MAX; 3]), Point3::from([f64::MIN; 3])), |(lo, hi), p| {
-        (lo.inf(p), hi.sup(p))
-    })
+    points.iter().fold((Point3::from([f64::MAX; 3]), Point3::from([f64::MIN; 3])), |(lo, hi), p| (lo.inf(p), hi.sup(p)))
 }
 
 /// Greedy thinning in candidate order: a candidate is kept unless a kept point lies within

@@ -39,10 +39,14 @@ pub fn delaunay(points: &[Point3<f64>]) -> Result<Delaunay, String> {
             [q.x, q.y, q.z, q.norm_squared()]
         })
         .collect();
+    // 'QJ' joggles the input by a tiny deterministic amount (Qhull's fixed seed): sections of
+    // cospherical points (every ring of a straight tube's vertices) then give proper tetrahedra
+    // linked across each ring, where 'Qt' would leave flat ones that break the chain.
     let qh = QhBuilder::default()
+        .qhull_args(["QJ"])
+        .map_err(|e| format!("Qhull options: {e:?}"))?
         .delaunay(true)
         .scale_last(true)
-        .triangulate(true)
         .build_managed(4, coords)
         .map_err(|e| format!("Qhull could not tessellate the surface points: {e:?}"))?;
     let mut index_of_id = std::collections::HashMap::new();
@@ -59,7 +63,8 @@ pub fn delaunay(points: &[Point3<f64>]) -> Result<Delaunay, String> {
         tets.push([a, b, c, d]);
         neighbour_ids.push(facet.neighbors().map(|n| n.iter().map(|f| f.id()).collect::<Vec<_>>()).unwrap_or_default());
     }
-    let adjacent = neighbour_ids.iter().map(|ids| ids.iter().filter_map(|id| index_of_id.get(id).copied()).collect()).collect();
+    let adjacent =
+        neighbour_ids.iter().map(|ids| ids.iter().filter_map(|id| index_of_id.get(id).copied()).collect()).collect();
     Ok(Delaunay { tets, adjacent })
 }
 
@@ -80,7 +85,12 @@ fn circumcentre(p: [Point3<f64>; 4]) -> Option<Point3<f64>> {
 /// for an internal tetrahedron, `vtkvmtkInternalTetrahedraExtractor`): the circumcentre of a
 /// tetrahedron spanning the lumen does, one spanning a gap outside the surface (between two
 /// branches, in a bend) does not.
-fn inside_every_tangent_plane(centre: &Point3<f64>, corners: &[u32; 4], samples: &[Point3<f64>], normals: &[Vector3<f64>]) -> bool {
+fn inside_every_tangent_plane(
+    centre: &Point3<f64>,
+    corners: &[u32; 4],
+    samples: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+) -> bool {
     corners.iter().all(|&i| (centre - samples[i as usize]).dot(&normals[i as usize]) < 0.0)
 }
 
@@ -98,9 +108,7 @@ fn spans_its_ball(corners: &[Point3<f64>; 4], radius: f64) -> bool {
 /// whose two balls overlap, so the segment between the centres lies in their union, inside the
 /// lumen. Link cost: length x mean(1/R), VMTK's 1/R cost.
 pub fn medial_graph(samples: &[Point3<f64>], normals: &[Vector3<f64>]) -> Result<BallGraph, String> {
-    let clock = std::time::Instant::now();
     let dt = delaunay(samples)?;
-    let t_delaunay = clock.elapsed().as_secs_f64();
     let balls: Vec<Option<Ball>> = dt
         .tets
         .par_iter()
@@ -119,9 +127,6 @@ pub fn medial_graph(samples: &[Point3<f64>], normals: &[Vector3<f64>]) -> Result
             node_of[t] = nodes.len() as u32;
             nodes.push(*b);
         }
-    }
-    if std::env::var_os("VH_DEBUG").is_some() {
-        eprintln!("voronoi: {} samples, {} tets, {} inside; delaunay {t_delaunay:.2}s, all {:.2}s", samples.len(), dt.tets.len(), nodes.len(), clock.elapsed().as_secs_f64());
     }
     let mut links = vec![vec![]; nodes.len()];
     for (t, adjacent) in dt.adjacent.iter().enumerate() {
@@ -144,9 +149,5 @@ pub fn medial_graph(samples: &[Point3<f64>], normals: &[Vector3<f64>]) -> Result
         }
     }
     let graph = BallGraph::from_parts(nodes, links);
-    if std::env::var_os("VH_DEBUG").is_some() {
-        let sizes = graph.component_sizes();
-        eprintln!("voronoi: {} components, largest {:?}", sizes.len(), &sizes[..sizes.len().min(8)]);
-    }
     Ok(graph)
 }

@@ -3,8 +3,8 @@
 
 mod centerline;
 mod csv;
-mod polydata;
 mod hygiene;
+mod polydata;
 mod stl;
 mod surface;
 pub mod topology;
@@ -13,9 +13,9 @@ mod vtp;
 
 use crate::error::{Error, Result};
 use crate::units::LengthUnit;
+pub use hygiene::{clean_surface, HygieneReport};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
-pub use hygiene::{clean_surface, HygieneReport};
 use polydata::PolyData;
 use std::path::{Path, PathBuf};
 
