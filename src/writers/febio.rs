@@ -27,7 +27,10 @@
 //! 4.11 ran to normal termination (`docs/examples/febio_*_tube.feb`). Labels are the mesh's:
 //! node id = node index + 1, element id = element index + 1 (as in every other deck), so ids are
 //! strictly increasing; `wall.feb` writes only the nodes its elements use (FEBio builds a
-//! node-id lookup table, gaps are allowed). Facets are the mesh's face sets wound with
+//! node-id lookup table, gaps are allowed). FEBio's log numbers the rows of its node data by a
+//! node's position in `<Nodes>`, not by its id (FEBio 4.11 runs, `tests/febio_run.rs`): in
+//! `wall.feb` the two differ, and the deck says so; `fsi.feb` writes every node in id order, so
+//! there they agree. Facets are the mesh's face sets wound with
 //! [`HEX_FACES`](crate::mesh::HEX_FACES), outward from the element they belong to: the wall's lumen
 //! facets point into the lumen, so a positive pressure inflates the wall.
 //!
@@ -631,7 +634,8 @@ pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
             cfg.static_steps
         ),
         "Node id = vesselhex node index + 1, element id = element index + 1 (the same labels in every deck);".into(),
-        "only the nodes of wall elements are written.".into(),
+        "only the nodes of wall elements are written. FEBio's log numbers the rows of node data by the".into(),
+        "node's position in <Nodes> (1, 2, ...), not by these ids: logged node k is the k-th <node> below.".into(),
     ];
     for s in &supports {
         let held: Vec<&str> = (0..3).filter(|k| s.ring_dofs[*k]).map(|k| DOF_NAMES[k]).collect();
