@@ -1,0 +1,426 @@
+//! Text of numbers for the writers, fast and without allocation, byte for byte the text of the
+//! standard formats the files have always used (`{}`, `{:?}`, `{:e}`, `{:.12e}` of an `f64`), and
+//! [`write_items`], which formats a long list of items in blocks on every core and writes the
+//! blocks in order, so a writer streams a file of any size with a few megabytes of buffers and
+//! the same bytes whatever the thread count.
+//!
+//! # Why not `format!`
+//! A 10-million-hex mesh writes some 10^8 numbers per format. `format!` allocates a `String` per
+//! call and std's float printing (Grisu with a Dragon fallback) is several times slower than
+//! zmij's (Schubfach). Both find the same digits: the shortest decimal that reads back to the
+//! same `f64`, the closest to it among those (the unit tests compare them on random numbers of
+//! every magnitude) but for a binary value exactly halfway between two shortest candidates, which
+//! std rounds up and zmij to even: those (found exactly), NaN and infinities go to std. This
+//! module only lays the digits out as each std format does.
+//!
+//! `{:.12e}` (13 significant digits, correctly rounded) is derived from the shortest digits D:
+//! with at most 13 digits, D padded with zeros is the answer (the binary value lies within half
+//! an ulp of D, far from a 13-digit rounding boundary); with 15 or more, rounding D to 13 digits
+//! rounds the binary value alike (a 14-digit midpoint between the two would itself be a shorter
+//! candidate in the round-trip interval); with exactly 14 digits ending in 5, D may be that
+//! midpoint and the binary value decides, so std's own formatting is asked (as for subnormals,
+//! whose precision is below 13 digits).
+
+use rayon::prelude::*;
+use std::io::{self, Write};
+
+/// A growing text buffer with number formatting.
+#[derive(Default)]
+pub struct Text {
+    pub bytes: Vec<u8>,
+}
+
+/// The shortest round-trip digits of a finite `f64`: value = d1.d2...dn x 10^exp (n >= 1; zero
+/// has the single digit 0).
+struct Shortest {
+    negative: bool,
+    digits: [u8; 17],
+    n: usize,
+    exp: i32,
+}
+
+impl Shortest {
+    /// zmij's digits, or `None` where std's may differ: NaN and infinities, and a binary value
+    /// exactly halfway between two shortest candidates (std takes the larger, zmij the even one;
+    /// such values have a short exact decimal expansion, e.g. 1 + 2^-17 = 1.00000762939453125).
+    fn of(x: f64) -> Option<Shortest> {
+        if !x.is_finite() {
+            return None;
+        }
+        let mut buffer = zmij::Buffer::new();
+        let s = buffer.format_finite(x).as_bytes();
+        let negative = s[0] == b'-';
+        let mut all = [0u8; 24];
+        let mut count = 0;
+        let mut before_point = None;
+        let mut i = negative as usize;
+        while i < s.len() && s[i] != b'e' {
+            match s[i] {
+                b'.' => before_point = Some(count),
+                d => {
+                    all[count] = d - b'0';
+                    count += 1;
+                }
+            }
+            i += 1;
+        }
+        let mut exp10: i32 = 0;
+        if i < s.len() {
+            let e = std::str::from_utf8(&s[i + 1..]).expect("ascii");
+            exp10 = e.trim_start_matches('+').parse().expect("zmij writes an integer exponent");
+        }
+        let point = before_point.unwrap_or(count) as i32;
+        let first = all[..count].iter().position(|&d| d != 0);
+        let mut out = Shortest { negative, digits: [0; 17], n: 1, exp: 0 };
+        if let Some(first) = first {
+            let last = all[..count].iter().rposition(|&d| d != 0).expect("a nonzero digit");
+            out.n = last + 1 - first;
+            out.digits[..out.n].copy_from_slice(&all[first..=last]);
+            out.exp = point - first as i32 - 1 + exp10;
+            if out.halfway_from_a_neighbour(x.abs()) {
+                return None;
+            }
+        }
+        Some(out)
+    }
+
+    fn is_zero(&self) -> bool {
+        self.n == 1 && self.digits[0] == 0
+    }
+
+    /// Whether `x` (>= 0) is exactly the digits plus or minus half a unit of their last place.
+    fn halfway_from_a_neighbour(&self, x: f64) -> bool {
+        let d = self.digits[..self.n].iter().fold(0u64, |a, &k| a * 10 + k as u64);
+        let last_place = self.exp - (self.n as i32 - 1);
+        [10 * d + 5, 10 * d - 5].into_iter().any(|m| decimal_is(x, m, last_place - 1))
+    }
+}
+
+/// Whether the binary value `x` (>= 0) is exactly m x 10^p.
+fn decimal_is(x: f64, m: u64, p: i32) -> bool {
+    if p >= 0 {
+        let exact = 10u128.checked_pow(p as u32).and_then(|t| t.checked_mul(m as u128));
+        return match exact {
+            Some(v) => x.fract() == 0.0 && x < 2f64.powi(127) && x as u128 == v,
+            None => true, // beyond u128: not decided here, std formats it
+        };
+    }
+    // m x 10^p = (m / 5^j) x 2^-j with j = -p: dyadic only when 5^j divides m.
+    let j = -p as u32;
+    let Some(five) = 5u64.checked_pow(j) else { return false };
+    if m % five != 0 {
+        return false;
+    }
+    let y = m / five;
+    let yf = y as f64;
+    yf as u64 == y && yf * 2f64.powi(-(j as i32)) == x
+}
+
+impl Text {
+    pub fn with_capacity(n: usize) -> Self {
+        Text { bytes: Vec::with_capacity(n) }
+    }
+    pub fn len(&self) -> usize {
+        self.bytes.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.bytes.is_empty()
+    }
+    pub fn clear(&mut self) {
+        self.bytes.clear();
+    }
+    pub fn str(&mut self, s: &str) -> &mut Self {
+        self.bytes.extend_from_slice(s.as_bytes());
+        self
+    }
+    pub fn byte(&mut self, b: u8) -> &mut Self {
+        self.bytes.push(b);
+        self
+    }
+    /// An unsigned integer (`{}`).
+    pub fn uint(&mut self, x: u64) -> &mut Self {
+        self.str(itoa::Buffer::new().format(x))
+    }
+    /// Integers separated by `sep`.
+    pub fn uints(&mut self, xs: impl IntoIterator<Item = u64>, sep: &str) -> &mut Self {
+        for (i, x) in xs.into_iter().enumerate() {
+            if i > 0 {
+                self.str(sep);
+            }
+            self.uint(x);
+        }
+        self
+    }
+
+    fn digits(&mut self, d: &[u8]) {
+        self.bytes.extend(d.iter().map(|d| d + b'0'));
+    }
+    fn sign(&mut self, s: &Shortest) {
+        if s.negative {
+            self.bytes.push(b'-');
+        }
+    }
+    /// d1.d2...dn e k, without the sign.
+    fn exponential(&mut self, digits: &[u8], exp: i32) {
+        self.digits(&digits[..1]);
+        if digits.len() > 1 {
+            self.bytes.push(b'.');
+            self.digits(&digits[1..]);
+        }
+        self.bytes.push(b'e');
+        if exp < 0 {
+            self.bytes.push(b'-');
+        }
+        self.uint(exp.unsigned_abs() as u64);
+    }
+    /// Positional notation of the shortest digits, without the sign; `min_fraction` 1 writes
+    /// `.0` after an integer.
+    fn positional(&mut self, s: &Shortest, min_fraction: usize) {
+        let d = &s.digits[..s.n];
+        if s.exp < 0 {
+            self.bytes.extend_from_slice(b"0.");
+            self.bytes.extend(std::iter::repeat_n(b'0', (-s.exp - 1) as usize));
+            self.digits(d);
+            return;
+        }
+        let whole = s.exp as usize + 1;
+        if d.len() <= whole {
+            self.digits(d);
+            self.bytes.extend(std::iter::repeat_n(b'0', whole - d.len()));
+            if min_fraction > 0 {
+                self.bytes.extend_from_slice(b".0");
+            }
+        } else {
+            self.digits(&d[..whole]);
+            self.bytes.push(b'.');
+            self.digits(&d[whole..]);
+        }
+    }
+
+    /// `format!("{x}")`.
+    pub fn display(&mut self, x: f64) -> &mut Self {
+        let Some(s) = Shortest::of(x) else {
+            return self.fallback(format_args!("{x}"));
+        };
+        self.sign(&s);
+        self.positional(&s, 0);
+        self
+    }
+    /// `format!("{x:?}")`.
+    pub fn debug(&mut self, x: f64) -> &mut Self {
+        let Some(s) = Shortest::of(x) else {
+            return self.fallback(format_args!("{x:?}"));
+        };
+        self.sign(&s);
+        let a = x.abs();
+        if a != 0.0 && !(1e-4..1e16).contains(&a) {
+            self.exponential(&s.digits[..s.n], s.exp);
+        } else {
+            self.positional(&s, 1);
+        }
+        self
+    }
+    /// `format!("{x:e}")`.
+    pub fn exp(&mut self, x: f64) -> &mut Self {
+        let Some(s) = Shortest::of(x) else {
+            return self.fallback(format_args!("{x:e}"));
+        };
+        self.sign(&s);
+        self.exponential(&s.digits[..s.n], s.exp);
+        self
+    }
+    /// `format!("{x:.12e}")`: 13 significant digits, correctly rounded (see the module notes).
+    pub fn exp12(&mut self, x: f64) -> &mut Self {
+        // Subnormals carry fewer than 13 significant digits: the shortest digits say too little.
+        if x != 0.0 && x.abs() < f64::MIN_POSITIVE {
+            return self.fallback(format_args!("{x:.12e}"));
+        }
+        let Some(s) = Shortest::of(x).filter(|s| !(s.n == 14 && s.digits[13] == 5)) else {
+            return self.fallback(format_args!("{x:.12e}"));
+        };
+        let mut d = [0u8; 13];
+        let mut exp = s.exp;
+        if s.is_zero() {
+            exp = 0;
+        } else if s.n <= 13 {
+            d[..s.n].copy_from_slice(&s.digits[..s.n]);
+        } else {
+            d.copy_from_slice(&s.digits[..13]);
+            if s.digits[13] >= 5 {
+                let mut k = 13;
+                loop {
+                    if k == 0 {
+                        // 9.99...9 rounds up to 10.00...0
+                        d[0] = 1;
+                        exp += 1;
+                        break;
+                    }
+                    k -= 1;
+                    if d[k] == 9 {
+                        d[k] = 0;
+                    } else {
+                        d[k] += 1;
+                        break;
+                    }
+                }
+            }
+        }
+        self.sign(&s);
+        self.exponential(&d, exp);
+        self
+    }
+
+    fn fallback(&mut self, args: std::fmt::Arguments) -> &mut Self {
+        let _ = self.bytes.write_fmt(args);
+        self
+    }
+}
+
+/// Items per block of [`write_items`]: big enough that a block is worth a thread, small enough
+/// that a round of blocks stays a few megabytes.
+const BLOCK: usize = 1 << 13;
+
+/// Writes the text of items `0..n` in order: `item(text, i)` appends item `i`. Blocks of items
+/// are formatted in parallel while the previous round is being written, so the file streams
+/// with a few rounds of blocks in memory and its bytes do not depend on the thread count.
+pub fn write_items<F>(w: &mut dyn Write, n: usize, item: F) -> io::Result<()>
+where
+    F: Fn(&mut Text, usize) + Sync,
+{
+    let per_round = BLOCK * 2 * rayon::current_num_threads().max(1);
+    let format_round = |start: usize| -> Vec<Text> {
+        let end = (start + per_round).min(n);
+        (start..end)
+            .step_by(BLOCK)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|b| {
+                let mut t = Text::with_capacity(64 * BLOCK);
+                for i in b..(b + BLOCK).min(end) {
+                    item(&mut t, i);
+                }
+                t
+            })
+            .collect()
+    };
+    if n == 0 {
+        return Ok(());
+    }
+    let mut ready = format_round(0);
+    let mut start = per_round;
+    loop {
+        let mut next = Vec::new();
+        let result = rayon::in_place_scope(|scope| {
+            if start < n {
+                scope.spawn(|_| next = format_round(start));
+            }
+            ready.iter().try_for_each(|t| w.write_all(&t.bytes))
+        });
+        result?;
+        if start >= n {
+            return Ok(());
+        }
+        ready = next;
+        start += per_round;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(x: f64) {
+        let mut t = Text::default();
+        t.display(x).str(" ").debug(x).str(" ").exp(x).str(" ").exp12(x);
+        let expected = format!("{x} {x:?} {x:e} {x:.12e}");
+        assert_eq!(String::from_utf8(t.bytes).unwrap(), expected, "bits {:#x}", x.to_bits());
+    }
+
+    /// A small deterministic generator (xorshift), so the test needs no crate and repeats.
+    struct Bits(u64);
+    impl Bits {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+    }
+
+    #[test]
+    fn every_format_matches_std_on_special_and_random_numbers() {
+        let special = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.1,
+            1e-4,
+            9.999999999999999e-5,
+            1e16,
+            9999999999999998.0,
+            1e15,
+            123456789.0,
+            5e-324,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+            9.9999999999995,
+            9.99999999999995,
+            0.99999999999995,
+            1.00000000000005,
+            2.5,
+            1.0000000000005,
+            6.123233995736766e-17,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for x in special {
+            check(x);
+        }
+        let mut g = Bits(0x9e3779b97f4a7c15);
+        for _ in 0..300_000 {
+            check(f64::from_bits(g.next()));
+        }
+        // Magnitudes of coordinates, directions and constants, with every digit count.
+        // Values with a short exact expansion, where ties between candidates occur.
+        for x in [1.0 + 2f64.powi(-17), 1052730259603333.25, 1658206780088562.25, 2f64.powi(60) + 2048.0] {
+            check(x);
+            check(-x);
+        }
+        for _ in 0..300_000 {
+            let bits = 1 + g.next() % 52;
+            let m = (g.next() >> (64 - bits)) | 1;
+            check(m as f64 * 2f64.powi(-((g.next() % 80) as i32)));
+        }
+        for _ in 0..300_000 {
+            let m = (g.next() >> 11) as f64 / (1u64 << 53) as f64;
+            let e = (g.next() % 40) as i32 - 20;
+            let x = (m - 0.5) * 10f64.powi(e);
+            check(x);
+            let digits = 1 + g.next() % 17;
+            let rounded: f64 = format!("{x:.*e}", digits as usize).parse().unwrap();
+            check(rounded);
+        }
+    }
+
+    #[test]
+    fn integers_and_lists() {
+        let mut t = Text::default();
+        t.uint(0).str(",").uint(u64::MAX).str(";").uints([1, 22, 333], ", ");
+        assert_eq!(String::from_utf8(t.bytes).unwrap(), format!("0,{};1, 22, 333", u64::MAX));
+    }
+
+    #[test]
+    fn items_are_written_in_order_whatever_the_block_count() {
+        for n in [0, 1, BLOCK - 1, BLOCK, 5 * BLOCK + 3, 40 * BLOCK + 1] {
+            let mut out = Vec::new();
+            write_items(&mut out, n, |t, i| {
+                t.uint(i as u64).byte(b'\n');
+            })
+            .unwrap();
+            let expected: String = (0..n).map(|i| format!("{i}\n")).collect();
+            assert!(out == expected.as_bytes(), "n = {n}");
+        }
+    }
+}
