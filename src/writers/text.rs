@@ -66,8 +66,12 @@ impl Shortest {
         }
         let mut exp10: i32 = 0;
         if i < s.len() {
-            let e = std::str::from_utf8(&s[i + 1..]).expect("ascii");
-            exp10 = e.trim_start_matches('+').parse().expect("zmij writes an integer exponent");
+            let (sign, digits) = match s[i + 1] {
+                b'-' => (-1, &s[i + 2..]),
+                b'+' => (1, &s[i + 2..]),
+                _ => (1, &s[i + 1..]),
+            };
+            exp10 = sign * digits.iter().fold(0, |e, d| 10 * e + (d - b'0') as i32);
         }
         let point = before_point.unwrap_or(count) as i32;
         let first = all[..count].iter().position(|&d| d != 0);
@@ -90,10 +94,39 @@ impl Shortest {
 
     /// Whether `x` (>= 0) is exactly the digits plus or minus half a unit of their last place.
     fn halfway_from_a_neighbour(&self, x: f64) -> bool {
+        if !short_exact_expansion(x) {
+            return false;
+        }
         let d = self.digits[..self.n].iter().fold(0u64, |a, &k| a * 10 + k as u64);
         let last_place = self.exp - (self.n as i32 - 1);
         [10 * d + 5, 10 * d - 5].into_iter().any(|m| decimal_is(x, m, last_place - 1))
     }
+}
+
+/// Whether the exact decimal expansion of `x` (>= 0) may have 18 significant digits or fewer,
+/// the most a value halfway between two candidates of at most 17 digits has. A value with k
+/// bits after the point and odd significand m has about log10(m) + k log10(5) digits; most
+/// coordinates have some forty, and are decided here without arithmetic on their digits.
+fn short_exact_expansion(x: f64) -> bool {
+    let bits = x.to_bits();
+    let biased = ((bits >> 52) & 0x7ff) as i32;
+    let mut m = bits & ((1u64 << 52) - 1);
+    let mut e = biased - 1075;
+    if biased == 0 {
+        e = -1074;
+    } else {
+        m |= 1 << 52;
+    }
+    if m == 0 {
+        return false;
+    }
+    let zeros = m.trailing_zeros() as i32;
+    let (m, fraction_bits) = (m >> zeros, -(e + zeros));
+    if fraction_bits <= 0 {
+        return x >= 1e17; // an integer: only one of more than 17 digits can lie halfway
+    }
+    let digits = (64 - m.leading_zeros()) as f64 * std::f64::consts::LOG10_2 + fraction_bits as f64 * 0.69897;
+    digits < 19.5
 }
 
 /// Whether the binary value `x` (>= 0) is exactly m x 10^p.
