@@ -30,12 +30,12 @@ pub struct Text {
     pub bytes: Vec<u8>,
 }
 
-/// The shortest round-trip digits of a finite `f64`: value = d1.d2...dn x 10^exp (n >= 1; zero
-/// has the single digit 0).
+/// The shortest round-trip digits of a finite `f64`: value = d1.d2...dn x 10^exp, the n digits
+/// being those of `digits` (n >= 1, no trailing zero; zero has the single digit 0).
 struct Shortest {
     negative: bool,
-    digits: [u8; 17],
-    n: usize,
+    digits: u64,
+    n: u32,
     exp: i32,
 }
 
@@ -50,46 +50,40 @@ impl Shortest {
         let mut buffer = zmij::Buffer::new();
         let s = buffer.format_finite(x).as_bytes();
         let negative = s[0] == b'-';
-        let mut all = [0u8; 24];
-        let mut count = 0;
-        let mut before_point = None;
+        let (mut digits, mut n, mut seen) = (0u64, 0u32, 0i32);
+        let (mut point, mut first) = (None, None);
         let mut i = negative as usize;
         while i < s.len() && s[i] != b'e' {
-            match s[i] {
-                b'.' => before_point = Some(count),
-                d => {
-                    all[count] = d - b'0';
-                    count += 1;
+            if s[i] == b'.' {
+                point = Some(seen);
+            } else {
+                let d = (s[i] - b'0') as u64;
+                if digits != 0 || d != 0 {
+                    first.get_or_insert(seen);
+                    digits = 10 * digits + d;
+                    n += 1;
                 }
+                seen += 1;
             }
             i += 1;
         }
-        let mut exp10: i32 = 0;
+        let mut exp10 = 0;
         if i < s.len() {
-            let (sign, digits) = match s[i + 1] {
+            let (sign, e) = match s[i + 1] {
                 b'-' => (-1, &s[i + 2..]),
                 b'+' => (1, &s[i + 2..]),
                 _ => (1, &s[i + 1..]),
             };
-            exp10 = sign * digits.iter().fold(0, |e, d| 10 * e + (d - b'0') as i32);
+            exp10 = sign * e.iter().fold(0, |e, d| 10 * e + (d - b'0') as i32);
         }
-        let point = before_point.unwrap_or(count) as i32;
-        let first = all[..count].iter().position(|&d| d != 0);
-        let mut out = Shortest { negative, digits: [0; 17], n: 1, exp: 0 };
-        if let Some(first) = first {
-            let last = all[..count].iter().rposition(|&d| d != 0).expect("a nonzero digit");
-            out.n = last + 1 - first;
-            out.digits[..out.n].copy_from_slice(&all[first..=last]);
-            out.exp = point - first as i32 - 1 + exp10;
-            if out.halfway_from_a_neighbour(x.abs()) {
-                return None;
-            }
+        let Some(first) = first else { return Some(Shortest { negative, digits: 0, n: 1, exp: 0 }) };
+        while digits % 10 == 0 {
+            digits /= 10;
+            n -= 1;
         }
-        Some(out)
-    }
-
-    fn is_zero(&self) -> bool {
-        self.n == 1 && self.digits[0] == 0
+        let exp = point.unwrap_or(seen) - first - 1 + exp10;
+        let out = Shortest { negative, digits, n, exp };
+        (!out.halfway_from_a_neighbour(x.abs())).then_some(out)
     }
 
     /// Whether `x` (>= 0) is exactly the digits plus or minus half a unit of their last place.
@@ -97,9 +91,8 @@ impl Shortest {
         if !short_exact_expansion(x) {
             return false;
         }
-        let d = self.digits[..self.n].iter().fold(0u64, |a, &k| a * 10 + k as u64);
         let last_place = self.exp - (self.n as i32 - 1);
-        [10 * d + 5, 10 * d - 5].into_iter().any(|m| decimal_is(x, m, last_place - 1))
+        [10 * self.digits + 5, 10 * self.digits - 5].into_iter().any(|m| decimal_is(x, m, last_place - 1))
     }
 }
 
@@ -185,20 +178,25 @@ impl Text {
         self
     }
 
-    fn digits(&mut self, d: &[u8]) {
-        self.bytes.extend(d.iter().map(|d| d + b'0'));
+    /// The n digits of `digits` (leading zeros written when it has fewer).
+    fn digits(&mut self, digits: u64, n: u32) {
+        let mut b = itoa::Buffer::new();
+        let text = b.format(digits);
+        self.bytes.extend(std::iter::repeat_n(b'0', (n as usize).saturating_sub(text.len())));
+        self.str(text);
     }
     fn sign(&mut self, s: &Shortest) {
         if s.negative {
             self.bytes.push(b'-');
         }
     }
-    /// d1.d2...dn e k, without the sign.
-    fn exponential(&mut self, digits: &[u8], exp: i32) {
-        self.digits(&digits[..1]);
-        if digits.len() > 1 {
+    /// d1.d2...dn e k of n digits, without the sign.
+    fn exponential(&mut self, digits: u64, n: u32, exp: i32) {
+        let tail = 10u64.pow(n - 1);
+        self.digits(digits / tail, 1);
+        if n > 1 {
             self.bytes.push(b'.');
-            self.digits(&digits[1..]);
+            self.digits(digits % tail, n - 1);
         }
         self.bytes.push(b'e');
         if exp < 0 {
@@ -209,24 +207,24 @@ impl Text {
     /// Positional notation of the shortest digits, without the sign; `min_fraction` 1 writes
     /// `.0` after an integer.
     fn positional(&mut self, s: &Shortest, min_fraction: usize) {
-        let d = &s.digits[..s.n];
         if s.exp < 0 {
             self.bytes.extend_from_slice(b"0.");
             self.bytes.extend(std::iter::repeat_n(b'0', (-s.exp - 1) as usize));
-            self.digits(d);
+            self.digits(s.digits, s.n);
             return;
         }
-        let whole = s.exp as usize + 1;
-        if d.len() <= whole {
-            self.digits(d);
-            self.bytes.extend(std::iter::repeat_n(b'0', whole - d.len()));
+        let whole = s.exp as u32 + 1;
+        if s.n <= whole {
+            self.digits(s.digits, s.n);
+            self.bytes.extend(std::iter::repeat_n(b'0', (whole - s.n) as usize));
             if min_fraction > 0 {
                 self.bytes.extend_from_slice(b".0");
             }
         } else {
-            self.digits(&d[..whole]);
+            let tail = 10u64.pow(s.n - whole);
+            self.digits(s.digits / tail, whole);
             self.bytes.push(b'.');
-            self.digits(&d[whole..]);
+            self.digits(s.digits % tail, s.n - whole);
         }
     }
 
@@ -247,7 +245,7 @@ impl Text {
         self.sign(&s);
         let a = x.abs();
         if a != 0.0 && !(1e-4..1e16).contains(&a) {
-            self.exponential(&s.digits[..s.n], s.exp);
+            self.exponential(s.digits, s.n, s.exp);
         } else {
             self.positional(&s, 1);
         }
@@ -259,7 +257,7 @@ impl Text {
             return self.fallback(format_args!("{x:e}"));
         };
         self.sign(&s);
-        self.exponential(&s.digits[..s.n], s.exp);
+        self.exponential(s.digits, s.n, s.exp);
         self
     }
     /// `format!("{x:.12e}")`: 13 significant digits, correctly rounded (see the module notes).
@@ -268,38 +266,30 @@ impl Text {
         if x != 0.0 && x.abs() < f64::MIN_POSITIVE {
             return self.fallback(format_args!("{x:.12e}"));
         }
-        let Some(s) = Shortest::of(x).filter(|s| !(s.n == 14 && s.digits[13] == 5)) else {
+        let Some(s) = Shortest::of(x).filter(|s| !(s.n == 14 && s.digits % 10 == 5)) else {
             return self.fallback(format_args!("{x:.12e}"));
         };
-        let mut d = [0u8; 13];
-        let mut exp = s.exp;
-        if s.is_zero() {
-            exp = 0;
-        } else if s.n <= 13 {
-            d[..s.n].copy_from_slice(&s.digits[..s.n]);
+        let (mut d, mut exp) = (s.digits, s.exp);
+        if s.n <= 13 {
+            d *= 10u64.pow(13 - s.n);
         } else {
-            d.copy_from_slice(&s.digits[..13]);
-            if s.digits[13] >= 5 {
-                let mut k = 13;
-                loop {
-                    if k == 0 {
-                        // 9.99...9 rounds up to 10.00...0
-                        d[0] = 1;
-                        exp += 1;
-                        break;
-                    }
-                    k -= 1;
-                    if d[k] == 9 {
-                        d[k] = 0;
-                    } else {
-                        d[k] += 1;
-                        break;
-                    }
+            let cut = 10u64.pow(s.n - 13);
+            let round_up = d % cut >= cut / 2;
+            d /= cut;
+            if round_up {
+                d += 1;
+                if d == 10u64.pow(13) {
+                    // 9.99...9 rounds up to 10.00...0
+                    d /= 10;
+                    exp += 1;
                 }
             }
         }
+        if s.digits == 0 {
+            exp = 0;
+        }
         self.sign(&s);
-        self.exponential(&d, exp);
+        self.exponential(d, 13, exp);
         self
     }
 
@@ -309,43 +299,45 @@ impl Text {
     }
 }
 
-/// Items per block of [`write_items`]: big enough that a block is worth a thread, small enough
-/// that a round of blocks stays a few megabytes.
-const BLOCK: usize = 1 << 13;
+/// Items per block of [`write_items`]: big enough that a block is worth a thread and that a
+/// block of long lines passes the writer's 1 MiB buffer without a copy, small enough that a round
+/// of blocks stays a few megabytes.
+const BLOCK: usize = 1 << 14;
 
 /// Writes the text of items `0..n` in order: `item(text, i)` appends item `i`. Blocks of items
 /// are formatted in parallel while the previous round is being written, so the file streams
-/// with a few rounds of blocks in memory and its bytes do not depend on the thread count.
+/// with two rounds of blocks in memory (their buffers reused from round to round) and its bytes
+/// do not depend on the thread count.
 pub fn write_items<F>(w: &mut dyn Write, n: usize, item: F) -> io::Result<()>
 where
     F: Fn(&mut Text, usize) + Sync,
 {
     let per_round = BLOCK * 2 * rayon::current_num_threads().max(1);
-    let format_round = |start: usize| -> Vec<Text> {
+    let format_round = |start: usize, mut blocks: Vec<Text>| -> Vec<Text> {
         let end = (start + per_round).min(n);
-        (start..end)
-            .step_by(BLOCK)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map(|b| {
-                let mut t = Text::with_capacity(64 * BLOCK);
-                for i in b..(b + BLOCK).min(end) {
-                    item(&mut t, i);
-                }
-                t
-            })
-            .collect()
+        let starts: Vec<usize> = (start..end).step_by(BLOCK).collect();
+        blocks.resize_with(starts.len(), Text::default);
+        blocks.par_iter_mut().zip(starts).for_each(|(t, b)| {
+            t.clear();
+            for i in b..(b + BLOCK).min(end) {
+                item(t, i);
+            }
+        });
+        blocks
     };
     if n == 0 {
         return Ok(());
     }
-    let mut ready = format_round(0);
+    let mut ready = format_round(0, Vec::new());
+    let mut spare = Vec::new();
     let mut start = per_round;
     loop {
         let mut next = Vec::new();
         let result = rayon::in_place_scope(|scope| {
             if start < n {
-                scope.spawn(|_| next = format_round(start));
+                let spare = std::mem::take(&mut spare);
+                let next = &mut next;
+                scope.spawn(move |_| *next = format_round(start, spare));
             }
             ready.iter().try_for_each(|t| w.write_all(&t.bytes))
         });
@@ -353,7 +345,7 @@ where
         if start >= n {
             return Ok(());
         }
-        ready = next;
+        spare = std::mem::replace(&mut ready, next);
         start += per_round;
     }
 }
