@@ -45,13 +45,13 @@
 //! with corner nodes and lumps each face's force on its four corners, so a C3D20 wall would leave
 //! its interface mid-edge nodes without force or displacement; `fe.calculix_element = C3D20*` is
 //! refused with that reason.
-//! * `Allrun`, `README.md`.
+//! * `Allrun` (`./Allrun N` runs the fluid on N MPI processes), `README.md`.
 //!
 //! Time: one fluid time step per coupling window, dt = min(1e-4 s, Courant 0.5 of the inflow);
 //! end time `openfoam.end_time` or 100 windows.
 
 use super::inp::{fmt_const, Dialect, EndHold, ModelData};
-use super::openfoam::{end_vars, inlet_velocities, lumen_polymesh, render, EndNames, PolyMesh};
+use super::openfoam::{end_vars, inlet_velocities, lumen_polymesh, render, slab_axis, EndNames, PolyMesh};
 use super::text::{write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::config::InletProfile;
@@ -320,8 +320,10 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
         end_patches.push_str(&render(END_PIECE.0, END_PIECE.1, &[("end", end.to_string())])?);
     }
     let windows = (end / dt).round().max(1.0) as u64;
+    let (_, slabs) = slab_axis(&poly);
     let mut vars: Vec<(&str, String)> = end_vars(&ends)?;
     vars.extend([
+        ("slabs_np", slabs("$np")),
         ("version", env!("CARGO_PKG_VERSION").to_string()),
         ("fluid", FLUID.into()),
         ("solid", SOLID.into()),

@@ -29,7 +29,9 @@
 //! From `templates/openfoam/` (embedded), placeholders `{{name}}` substituted strictly (an
 //! unknown placeholder is an error): `system/{controlDict,fvSchemes,fvSolution}`, `0/U`, `0/p`,
 //! `constant/transportProperties` (Newtonian blood, nu = 3.5e-6 m2/s by default),
-//! `constant/turbulenceProperties` (laminar; v1912 reads this name), `Allrun`. The inlet
+//! `constant/turbulenceProperties` (laminar; v1912 reads this name), `system/decomposeParDict`
+//! (scotch) and `Allrun` (`./Allrun N` runs on N MPI processes: decomposePar, the solver under
+//! mpirun, reconstructPar). The inlet
 //! velocity is written per inlet face ([`inlet_velocities`]): parabolic in the distance to the
 //! section boundary, or plug, scaled so that the inlet flux is exactly the flow rate asked.
 //! Every end of the mesh is its own patch with its own entry in `0/U` and `0/p` ([`EndNames`]):
@@ -718,6 +720,7 @@ const TEMPLATES: &[(&str, &str)] = &[
     ("system/controlDict", include_str!("../../templates/openfoam/system/controlDict")),
     ("system/fvSchemes", include_str!("../../templates/openfoam/system/fvSchemes")),
     ("system/fvSolution", include_str!("../../templates/openfoam/system/fvSolution")),
+    ("system/decomposeParDict", include_str!("../../templates/openfoam/system/decomposeParDict")),
     ("0/U", include_str!("../../templates/openfoam/0/U")),
     ("0/p", include_str!("../../templates/openfoam/0/p")),
     ("constant/transportProperties", include_str!("../../templates/openfoam/constant/transportProperties")),
@@ -833,6 +836,21 @@ fn min_centre_distance(poly: &PolyMesh) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The axis of the lumen's longest extent (`x`, `y` or `z`) and the `n` of decomposePar's
+/// `simple` method that cuts it into a given number of slabs: `(1 1 N)` along z, ...
+pub fn slab_axis(poly: &PolyMesh) -> (&'static str, impl Fn(&str) -> String) {
+    let extent = |k: usize| {
+        let (lo, hi) = poly.points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| (lo.min(p[k]), hi.max(p[k])));
+        hi - lo
+    };
+    let axis = (0..3).max_by(|a, b| extent(*a).total_cmp(&extent(*b))).unwrap_or(2);
+    let slabs = move |count: &str| {
+        let n: Vec<&str> = (0..3).map(|k| if k == axis { count } else { "1" }).collect();
+        format!("({})", n.join(" "))
+    };
+    (["x", "y", "z"][axis], slabs)
+}
+
 /// Placeholder values of the case templates.
 fn case_vars(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Result<Vec<(&'static str, String)>> {
     let inlet = poly
@@ -871,8 +889,12 @@ fn case_vars(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Resul
             )
         }
     };
+    let (axis, slabs) = slab_axis(poly);
     let mut vars = end_vars(ends)?;
     vars.extend([
+        ("slab_axis", axis.to_string()),
+        ("slabs_2", slabs("2")),
+        ("slabs_np", slabs("$np")),
         ("version", env!("CARGO_PKG_VERSION").to_string()),
         ("application", application.into()),
         ("ddt_scheme", ddt.into()),
