@@ -950,11 +950,11 @@ pub fn write_case(poly: &PolyMesh, ends: &EndNames, options: &WriteOptions, case
 /// Writes lumen + wall in one polyMesh into `dir/openfoam-fsi/`, with the system files that
 /// OpenFOAM utilities need, `constant/polyMesh/fluidSolidZones` and an `Allrun` that splits the regions.
 pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
+    // The lumen's polyMesh gives the system files' values; it is gone before the whole one is built.
+    let vars = case_vars(&lumen_polymesh(mesh)?, &EndNames::of(mesh)?, &options.openfoam)?;
     let poly = fsi_polymesh(mesh)?;
     let case = dir.join("openfoam-fsi");
     let mut out = write_polymesh(&poly, options.openfoam.binary, &case)?;
-    let lumen = lumen_polymesh(mesh)?;
-    let vars = case_vars(&lumen, &EndNames::of(mesh)?, &options.openfoam)?;
     for (rel, text) in TEMPLATES.iter().filter(|(rel, _)| rel.starts_with("system/")) {
         out.push(write_text(&case, rel, &render(rel, text, &vars)?, false)?);
     }
