@@ -39,7 +39,7 @@
 
 use super::inp::MidEdges;
 use super::material::WallMaterial;
-use super::text::{write_items, Text};
+use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{face_nodes, sets, ElementFace, Region, VesselMesh};
@@ -229,9 +229,9 @@ pub fn fill_template(label: &str, template: &str, values: &[(&str, String)]) -> 
 /// A number as FEBio reads it back exactly: the shortest representation that round-trips (17
 /// significant digits at most), in exponent form only for very small or very large magnitudes.
 pub fn num(x: f64) -> String {
-    let mut t = Text::default();
-    push_num(&mut t, x);
-    String::from_utf8(t.bytes).expect("ascii")
+    text_of(|t| {
+        push_num(t, x);
+    })
 }
 
 /// [`num`] appended to a text.

@@ -52,7 +52,7 @@
 
 use super::inp::{fmt_const, Dialect, EndHold, ModelData};
 use super::openfoam::{end_vars, inlet_velocities, lumen_polymesh, render, slab_axis, EndNames, PolyMesh};
-use super::text::{write_items, Text};
+use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::config::InletProfile;
 use crate::error::{Error, Result};
@@ -196,9 +196,9 @@ pub fn interface_map(mesh: &VesselMesh, poly: &PolyMesh) -> Result<InterfaceMap>
 
 /// Shortest round-trip text of a float (no "-0").
 fn num(x: f64) -> String {
-    let mut t = Text::default();
-    push_num(&mut t, x);
-    String::from_utf8(t.bytes).expect("ascii")
+    text_of(|t| {
+        push_num(t, x);
+    })
 }
 
 /// [`num`] appended to a text.

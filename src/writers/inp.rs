@@ -55,7 +55,7 @@
 //! constants in 20-character fields). At most 16 entries per data
 //! line (C3D20 elements continue on a second line).
 
-use super::text::{write_items, Text};
+use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{abaqus_face_label, sets, ElementFace, Region, VesselMesh, FACE_INNER, HEX_EDGES};
@@ -189,9 +189,9 @@ impl Default for FeConfig {
 
 /// A real number for a data line: 13 significant digits, at most 20 characters.
 pub fn fmt_coord(x: f64) -> String {
-    let mut t = Text::default();
-    coord(&mut t, x);
-    String::from_utf8(t.bytes).expect("ascii")
+    text_of(|t| {
+        coord(t, x);
+    })
 }
 
 /// [`fmt_coord`] appended to a text.
@@ -799,9 +799,9 @@ impl<'a> Deck<'a> {
 /// The six components of two vectors as data-line fields, `ax, ay, az, bx, by, bz`: the two
 /// points of a `*TRANSFORM` axis, the two directions of a `*DISTRIBUTION` line.
 fn two_vectors(a: &nalgebra::Vector3<f64>, b: &nalgebra::Vector3<f64>) -> String {
-    let mut t = Text::default();
-    vector_pair(&mut t, a, b);
-    String::from_utf8(t.bytes).expect("ascii")
+    text_of(|t| {
+        vector_pair(t, a, b);
+    })
 }
 
 /// [`two_vectors`] appended to a text.

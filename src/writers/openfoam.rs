@@ -43,7 +43,7 @@
 //! 'wall' which clashes with patch 2 of the same name" warning (the type puts every wall patch in
 //! the group `wall`); the name is kept because users and the issue expect it.
 
-use super::text::{write_items, Text};
+use super::text::{write_binary, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::config::{FoamSolver, InletProfile, OpenFoamConfig};
 use crate::error::{Error, Result};
@@ -564,18 +564,10 @@ fn header(
     writeln!(w, "// * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * //\n")
 }
 
-/// Items encoded per block of a binary list.
-const BINARY_BLOCK: usize = 1 << 14;
-
 /// A binary list of `n` items: `N\n(` raw bytes `)`; `encode(i, bytes)` appends item `i`.
 fn binary_list(w: &mut dyn Write, n: usize, encode: impl Fn(usize, &mut Vec<u8>)) -> std::io::Result<()> {
     write!(w, "{n}\n(")?;
-    let mut buffer = Vec::with_capacity(BINARY_BLOCK * 24);
-    for start in (0..n).step_by(BINARY_BLOCK) {
-        buffer.clear();
-        (start..(start + BINARY_BLOCK).min(n)).for_each(|i| encode(i, &mut buffer));
-        w.write_all(&buffer)?;
-    }
+    write_binary(w, n, |range, bytes| range.for_each(|i| encode(i, bytes)))?;
     writeln!(w, ")")
 }
 

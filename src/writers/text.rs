@@ -299,6 +299,33 @@ impl Text {
     }
 }
 
+/// The text `write` appends to an empty [`Text`], as a `String` (for the few numbers written
+/// outside the long lists).
+pub fn text_of(write: impl FnOnce(&mut Text)) -> String {
+    let mut t = Text::default();
+    write(&mut t);
+    String::from_utf8(t.bytes).expect("the writers' text is ASCII")
+}
+
+/// Items encoded per block of [`write_binary`].
+const BINARY_BLOCK: usize = 1 << 14;
+
+/// Writes the bytes of items `0..n` in order, `encode(range, bytes)` appending those of a range
+/// of items: a binary array streamed through one small buffer.
+pub fn write_binary(
+    w: &mut dyn Write,
+    n: usize,
+    encode: impl Fn(std::ops::Range<usize>, &mut Vec<u8>),
+) -> io::Result<()> {
+    let mut buffer = Vec::with_capacity(BINARY_BLOCK * 24);
+    for start in (0..n).step_by(BINARY_BLOCK) {
+        buffer.clear();
+        encode(start..(start + BINARY_BLOCK).min(n), &mut buffer);
+        w.write_all(&buffer)?;
+    }
+    Ok(())
+}
+
 /// Items per block of [`write_items`]: big enough that a block is worth a thread and that a
 /// block of long lines passes the writer's 1 MiB buffer without a copy, small enough that a round
 /// of blocks stays a few megabytes.

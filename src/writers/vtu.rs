@@ -11,6 +11,7 @@
 //! byte count before each array), written straight from the mesh in blocks: no copy of an array
 //! and no base64 text is ever held in memory, and the file is a third smaller than base64.
 
+use super::text::write_binary;
 use super::{write_atomic, WriteOptions};
 use crate::error::{Error, Result};
 use crate::mesh::VesselMesh;
@@ -20,8 +21,6 @@ use std::path::{Path, PathBuf};
 
 /// VTK_HEXAHEDRON.
 const VTK_HEXAHEDRON: u8 = 12;
-/// Values per block when the arrays are encoded.
-const BLOCK: usize = 1 << 14;
 
 /// One array of the appended data: its XML attributes and how to write its values.
 struct Array<'a> {
@@ -117,14 +116,9 @@ fn write_grid(w: &mut dyn Write, mesh: &VesselMesh, points: &Array, cells: &[Arr
     writeln!(w, "      </CellData>\n    </Piece>\n  </UnstructuredGrid>")?;
     // The data starts after the underscore; the newline after the last array closes it.
     write!(w, "  <AppendedData encoding=\"raw\">\n   _")?;
-    let mut buffer = Vec::with_capacity(BLOCK * 24);
     for a in std::iter::once(points).chain(cells).chain(data) {
         w.write_all(&a.bytes().to_le_bytes())?;
-        for start in (0..a.len).step_by(BLOCK) {
-            buffer.clear();
-            (a.encode)(start..(start + BLOCK).min(a.len), &mut buffer);
-            w.write_all(&buffer)?;
-        }
+        write_binary(w, a.len, &a.encode)?;
     }
     writeln!(w, "\n  </AppendedData>\n</VTKFile>")
 }
