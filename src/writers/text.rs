@@ -134,7 +134,7 @@ fn decimal_is(x: f64, m: u64, p: i32) -> bool {
     // m x 10^p = (m / 5^j) x 2^-j with j = -p: dyadic only when 5^j divides m.
     let j = -p as u32;
     let Some(five) = 5u64.checked_pow(j) else { return false };
-    if m % five != 0 {
+    if !m.is_multiple_of(five) {
         return false;
     }
     let y = m / five;
@@ -436,7 +436,7 @@ mod tests {
         }
         // Magnitudes of coordinates, directions and constants, with every digit count.
         // Values with a short exact expansion, where ties between candidates occur.
-        for x in [1.0 + 2f64.powi(-17), 1052730259603333.25, 1658206780088562.25, 2f64.powi(60) + 2048.0] {
+        for x in [1.0 + 2f64.powi(-17), 1052730259603333.0 + 0.25, 1658206780088562.0 + 0.25, 2f64.powi(60) + 2048.0] {
             check(x);
             check(-x);
         }

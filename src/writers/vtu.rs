@@ -22,6 +22,9 @@ use std::path::{Path, PathBuf};
 /// VTK_HEXAHEDRON.
 const VTK_HEXAHEDRON: u8 = 12;
 
+/// Appends the little-endian bytes of a range of tuples to a buffer.
+type Encode<'a> = Box<dyn Fn(std::ops::Range<usize>, &mut Vec<u8>) + 'a>;
+
 /// One array of the appended data: its XML attributes and how to write its values.
 struct Array<'a> {
     vtk_type: &'static str,
@@ -31,8 +34,7 @@ struct Array<'a> {
     len: usize,
     /// Bytes per component.
     width: usize,
-    /// Appends the little-endian bytes of tuples `range` to the buffer.
-    encode: Box<dyn Fn(std::ops::Range<usize>, &mut Vec<u8>) + 'a>,
+    encode: Encode<'a>,
 }
 
 impl Array<'_> {
