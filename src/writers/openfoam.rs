@@ -30,8 +30,9 @@
 //! unknown placeholder is an error): `system/{controlDict,fvSchemes,fvSolution}`, `0/U`, `0/p`,
 //! `constant/transportProperties` (Newtonian blood, nu = 3.5e-6 m2/s by default),
 //! `constant/turbulenceProperties` (laminar; v1912 reads this name), `system/decomposeParDict`
-//! (scotch) and `Allrun` (`./Allrun N` runs on N MPI processes: decomposePar, the solver under
-//! mpirun, reconstructPar). The inlet
+//! (method `simple`, slabs across the lumen's longest extent: Debian's v1912 has no Scotch) and
+//! `Allrun` (`./Allrun N` runs on N MPI processes: decomposePar, the solver under mpirun,
+//! reconstructPar). The inlet
 //! velocity is written per inlet face ([`inlet_velocities`]): parabolic in the distance to the
 //! section boundary, or plug, scaled so that the inlet flux is exactly the flow rate asked.
 //! Every end of the mesh is its own patch with its own entry in `0/U` and `0/p` ([`EndNames`]):
@@ -245,17 +246,9 @@ struct PatchSpec<'a> {
 /// Slot marks of `build`: a cell face that is on the boundary, not yet in a patch.
 const UNASSIGNED: u32 = u32::MAX;
 
-/// [`face_partners`]: a cell face shared with no other cell.
-const NO_PARTNER: u32 = u32::MAX;
-
-/// For every face slot (cell * 6 + canonical face) of the elements `cells`, the slot of the other
-/// cell's face on the same four nodes, or [`NO_PARTNER`]. The candidates are the cells on both
-/// ends of a diagonal of the face (from a node-to-cell table, each node's cells ascending), so the
-/// pairing costs a few comparisons per face and the memory of the table. A face on more than two
-/// cells, or twice on one, is refused.
-fn face_partners(mesh: &VesselMesh, cells: Range<usize>) -> Result<Vec<u32>> {
-    let hexes = &mesh.hexes[cells.clone()];
-    let mut first = vec![0u32; mesh.nodes.len() + 1];
+/// The cells of `hexes` around each node, ascending: node n's are `around[first[n]..first[n + 1]]`.
+fn cells_around_nodes(hexes: &[crate::mesh::Hex], n_nodes: usize) -> (Vec<u32>, Vec<u32>) {
+    let mut first = vec![0u32; n_nodes + 1];
     for h in hexes {
         for &n in h {
             first[n as usize + 1] += 1;
@@ -272,7 +265,20 @@ fn face_partners(mesh: &VesselMesh, cells: Range<usize>) -> Result<Vec<u32>> {
             fill[n as usize] += 1;
         }
     }
-    drop(fill);
+    (first, around)
+}
+
+/// [`face_partners`]: a cell face shared with no other cell.
+const NO_PARTNER: u32 = u32::MAX;
+
+/// For every face slot (cell * 6 + canonical face) of the elements `cells`, the slot of the other
+/// cell's face on the same four nodes, or [`NO_PARTNER`]. The candidates are the cells on both
+/// ends of a diagonal of the face (from a node-to-cell table, each node's cells ascending), so the
+/// pairing costs a few comparisons per face and the memory of the table. A face on more than two
+/// cells, or twice on one, is refused.
+fn face_partners(mesh: &VesselMesh, cells: Range<usize>) -> Result<Vec<u32>> {
+    let hexes = &mesh.hexes[cells.clone()];
+    let (first, around) = cells_around_nodes(hexes, mesh.nodes.len());
     let key = |c: usize, f: usize| {
         let mut k = face_nodes(&hexes[c], f);
         k.sort_unstable();
