@@ -15,6 +15,7 @@ pub mod inp;
 pub mod material;
 pub mod openfoam;
 pub mod template;
+pub mod text;
 pub mod vtu;
 
 /// What every writer may need besides the mesh.
