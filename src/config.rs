@@ -453,7 +453,7 @@ impl MeshConfig {
         let total = w.intima.fraction + w.media.fraction + w.adventitia.fraction;
         for (name, layer) in [("intima", &w.intima), ("media", &w.media), ("adventitia", &w.adventitia)] {
             if !(layer.fraction > 0.0 && layer.fraction <= 1e6) {
-                return bad(&format!("wall.{name}.fraction"), "must be positive");
+                return bad(&format!("wall.{name}.fraction"), "must be positive (and at most 1e6)");
             }
             if layer.fraction < MIN_LAYER_SHARE * total {
                 return bad(
@@ -486,11 +486,10 @@ impl MeshConfig {
                 return bad(key, "must be at most 100000 (200 smooth over about a radius)");
             }
         }
-        if !(0.0..=1000.0).contains(&c.trim_inlet) || !(0.0..=1000.0).contains(&c.trim_outlet) {
-            return bad(
-                "centerline.trim_inlet",
-                "trim_inlet and trim_outlet must be between 0 and 1000 (relative to the radius)",
-            );
+        for (key, trim) in [("centerline.trim_inlet", c.trim_inlet), ("centerline.trim_outlet", c.trim_outlet)] {
+            if !(0.0..=1000.0).contains(&trim) {
+                return bad(key, "must be between 0 and 1000 (relative to the radius)");
+            }
         }
         if !(0.0..=10.0).contains(&c.junction_merge_radii) {
             return bad("centerline.junction_merge_radii", "must be between 0 and 10 (relative to the radius)");
@@ -566,7 +565,7 @@ fn place(text: &str, at: usize) -> String {
 
 /// A message on one line.
 fn one_line(message: &str) -> String {
-    message.split_whitespace().collect::<Vec<_>>().join(" ")
+    message.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" ")
 }
 
 /// Where a deserialisation error is: the key path it names (`in `lumen.radial_elements``), its

@@ -343,7 +343,7 @@ fn main() -> ExitCode {
 
 /// Text on one line (messages from dependencies may span several).
 fn one_line(text: &str) -> String {
-    text.split_whitespace().collect::<Vec<_>>().join(" ")
+    text.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" ")
 }
 
 /// Prints clap's error on one line, `vesselhex: error: ...`, keeping its tip and usage; help and

@@ -537,13 +537,20 @@ fn exchange(from: &Path, to: &Path) -> Result<()> {
     #[cfg(any(target_os = "linux", target_os = "android"))]
     {
         use rustix::fs::{renameat_with, RenameFlags, CWD};
+        use rustix::io::Errno;
         match renameat_with(CWD, from, CWD, to, RenameFlags::EXCHANGE) {
             Ok(()) => return Ok(()),
-            Err(e) if e == rustix::io::Errno::INVAL || e == rustix::io::Errno::NOSYS => {}
+            // The kernel or the file system cannot exchange.
+            Err(e) if [Errno::INVAL, Errno::NOSYS, Errno::NOTSUP, Errno::OPNOTSUPP].contains(&e) => {}
             Err(e) => return Err(Error::io(to, "cannot move the new outputs into place", e.into())),
         }
     }
-    // Renaming a folder onto an empty one replaces it.
+    replace_by_two_renames(from, to)
+}
+
+/// Moves the folder `to` aside (under a fresh name: renaming a folder onto an empty one
+/// replaces it), `from` in its place, and removes the old one; `to` is briefly absent.
+fn replace_by_two_renames(from: &Path, to: &Path) -> Result<()> {
     let (parent, name) = (to.parent().unwrap_or(to), to.file_name().unwrap_or_default());
     let aside = fresh_folder(parent, name).map_err(|e| Error::io(to, "cannot make room for the old outputs", e))?;
     if let Err(e) = std::fs::rename(to, &aside) {
@@ -556,4 +563,68 @@ fn exchange(from: &Path, to: &Path) -> Result<()> {
     }
     let _ = std::fs::remove_dir_all(&aside);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("vesselhex-output-{}-{tag}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn names(dir: &Path) -> Vec<String> {
+        let mut n: Vec<String> =
+            std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        n.sort();
+        n
+    }
+
+    #[test]
+    fn both_ways_of_committing_leave_the_new_content_only() {
+        for (k, commit) in [exchange, replace_by_two_renames].into_iter().enumerate() {
+            let d = scratch(&format!("commit-{k}"));
+            let (old, new) = (d.join("out"), d.join(".out.vesselhex-abcdefgh"));
+            std::fs::create_dir_all(old.join("openfoam")).unwrap();
+            std::fs::write(old.join("openfoam/p"), "old").unwrap();
+            std::fs::create_dir_all(&new).unwrap();
+            std::fs::write(new.join("mesh.vtu"), "new").unwrap();
+            commit(&new, &old).unwrap();
+            let _ = std::fs::remove_dir_all(&new); // what commit() does with the old content
+            assert_eq!(names(&old), ["mesh.vtu"]);
+            assert_eq!(names(&d), ["out"], "nothing left beside the output");
+            std::fs::remove_dir_all(&d).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_folder_is_vesselhexs_only_with_every_entry_listed() {
+        let d = scratch("owned");
+        std::fs::create_dir_all(d.join("openfoam/system")).unwrap();
+        for f in ["mesh.vtu", "openfoam/system/controlDict"] {
+            std::fs::write(d.join(f), "x").unwrap();
+        }
+        let report =
+            r#"{"vesselhex_version": "0", "outputs": ["mesh.vtu", "openfoam/system/controlDict", "report.json"]}"#;
+        std::fs::write(d.join(MARKER), report).unwrap();
+        let listed = written_by_vesselhex(&d).expect("vesselhex's");
+        assert_eq!(first_unlisted(&d, Path::new(""), &listed).unwrap(), None);
+        std::fs::write(d.join("openfoam/system/mine"), "x").unwrap();
+        assert_eq!(first_unlisted(&d, Path::new(""), &listed).unwrap(), Some(PathBuf::from("openfoam/system/mine")));
+        // A report listing a path out of the folder marks nothing.
+        std::fs::write(d.join(MARKER), r#"{"vesselhex_version": "0", "outputs": ["../x"]}"#).unwrap();
+        assert!(written_by_vesselhex(&d).is_none());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn the_root_is_no_output_folder() {
+        assert!(split_output(Path::new("/")).is_err());
+        assert!(split_output(Path::new("")).is_err());
+        let (parent, name) = split_output(Path::new("a/b")).unwrap();
+        assert!(parent.is_absolute() && parent.ends_with("a") && name == "b");
+    }
 }

@@ -376,22 +376,23 @@ fn check_inside(surface: &LumenSurface, tree: &CenterlineTree, centerline_source
 /// tell inside from outside, so a centerline found "outside" may not be.
 fn check_winding(surface: &LumenSurface) -> Result<()> {
     match winding_fault(&surface.triangles) {
-        Some(fault) => Err(Error::input(&surface.source, fault)),
+        Some((fault, _)) => Err(Error::input(&surface.source, fault)),
         None => Ok(()),
     }
 }
 
-/// What is wrong with the triangles' winding, if some shared edges are run the same way by
-/// both their triangles.
-fn winding_fault(triangles: &[[u32; 3]]) -> Option<String> {
+/// What is wrong with the triangles' winding, and the share of shared edges it concerns, if
+/// some shared edges are run the same way by both their triangles.
+fn winding_fault(triangles: &[[u32; 3]]) -> Option<(String, f64)> {
     let (misoriented, shared) = misoriented_edges(triangles);
     (misoriented > 0).then(|| {
-        format!(
+        let fault = format!(
             "the surface's triangles are not wound consistently ({misoriented} of its {shared} shared edges are run \
              the same way by both their triangles), so vesselhex cannot tell the lumen's inside from its outside: \
              orient the triangles consistently (e.g. ParaView's Generate Surface Normals with Consistency on, or \
              MeshLab's Re-Orient all faces coherently) and save again"
-        )
+        );
+        (fault, misoriented as f64 / shared as f64)
     })
 }
 
@@ -406,9 +407,8 @@ fn name_winding(error: Error, surface: &TriangleSurface) -> Error {
     if matches!(error, Error::Config(_)) {
         return error;
     }
-    let (misoriented, shared) = misoriented_edges(&surface.triangles);
     match winding_fault(&surface.triangles) {
-        Some(fault) if misoriented as f64 > MISWOUND_SHARE * shared as f64 => {
+        Some((fault, share)) if share > MISWOUND_SHARE => {
             Error::input(&surface.source, format!("{fault} (meshing stopped: {error})"))
         }
         _ => error,
