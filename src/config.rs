@@ -396,7 +396,8 @@ impl MeshConfig {
         };
         config.validate().map_err(|e| match e {
             Error::Config(message) => {
-                let key = message.split(':').next().unwrap_or_default();
+                // Messages start with the key: "lumen.core_elements: ...", "febio.element = ...".
+                let key = message.split([':', ' ', '=']).next().unwrap_or_default();
                 let keys: Vec<&str> = key.split('.').collect();
                 let at = line_of_key(&text, &keys).map_or(String::new(), |l| format!("line {l}: "));
                 Error::input(path, format!("{at}{message}"))

@@ -6,7 +6,7 @@
 //! - Ownership: vesselhex replaces only a folder that is empty, that it creates, or that it wrote
 //!   before: its `report.json` lists every file written (`outputs`), and any other entry (a
 //!   user's file, a solver's results) makes the folder foreign, refused without `--force`.
-//! - Staging: everything is written into a fresh folder beside the output (`.NAME.vesselhex-XXXXXX`,
+//! - Staging: everything is written into a fresh folder beside the output (`.NAME.vesselhex-XXXXXXXX`,
 //!   a random name created by mkdir, which never follows a link), never into the output itself.
 //! - Commit: the staging folder and the output folder swap names in one `renameat2` exchange and
 //!   the old content is removed, so a reader sees the old result or the new one, never a mix,
@@ -29,7 +29,6 @@ pub const MARKER: &str = "report.json";
 const MAX_MARKER_BYTES: u64 = 64 << 20;
 
 /// What an interruption must remove, registered as the run creates it.
-#[derive(Default)]
 struct Undo {
     /// Folders removed with their content (staging folders).
     trees: Vec<PathBuf>,
