@@ -327,13 +327,14 @@ fn create_missing(dir: &Path) -> Result<Vec<PathBuf>> {
 /// Refuses an output folder that holds the current folder or an input file.
 fn refuse_dangerous(output: &Path, path: &Path, inputs: &[&Path]) -> Result<()> {
     let refuse = |why: String| Err(Error::input(output, why));
-    if let Ok(cwd) = std::env::current_dir().and_then(|d| d.canonicalize()) {
-        if cwd.starts_with(path) {
-            return refuse(
-                "is the current folder or holds it; vesselhex replaces the whole output folder, so name a \
-                 folder of its own (e.g. out/vessel)"
-                    .into(),
-            );
+    let own_folder = "vesselhex replaces the whole output folder, so name a folder of its own (e.g. out/vessel)";
+    if path.components().filter(|c| matches!(c, Component::Normal(_))).count() < 2 {
+        return refuse(format!("is a top-level folder; {own_folder}"));
+    }
+    for (what, dir) in [("the current folder", std::env::current_dir().ok()), ("the home folder", std::env::home_dir())]
+    {
+        if dir.and_then(|d| d.canonicalize().ok()).is_some_and(|d| d.starts_with(path)) {
+            return refuse(format!("is {what} or holds it; {own_folder}"));
         }
     }
     for input in inputs {

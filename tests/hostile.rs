@@ -484,6 +484,9 @@ fn outputs_are_replaced_whole_and_only_where_vesselhex_wrote() {
     // Never the current folder, the root, or a folder holding an input (even with --force).
     c.refused(&["--output", ".", "--force"], ERROR, "is the current folder");
     c.refused(&["--output", "/", "--force"], ERROR, "is the root folder");
+    let top = Path::new("/vesselhex-hostile-test-top-level");
+    c.refused(&["--output", path_str(top), "--force"], ERROR, "is a top-level folder");
+    assert!(!top.exists());
     let (stl, csv) = fixture("aaa");
     std::fs::copy(&stl, c.base.join("empty/aaa.stl")).unwrap();
     let inside = c.base.join("empty/aaa.stl");
