@@ -436,13 +436,11 @@ fn announced_size(spec: &ArraySpec, header: &Header) -> u64 {
         Format::Ascii => return 0,
         Format::Binary => prefix(spec.text.as_bytes()),
         Format::Appended => {
-            let Some(block) = header.appended.as_ref().and_then(|a| Some((a, appended_slice(a, spec.offset?).ok()?)))
-            else {
-                return 0;
-            };
-            match block.0.encoding {
-                Encoding::Raw => block.1[..block.1.len().min(words)].to_vec(),
-                Encoding::Base64 => prefix(block.1),
+            let (Some(appended), Some(offset)) = (header.appended.as_ref(), spec.offset) else { return 0 };
+            let Ok(block) = appended_slice(appended, offset) else { return 0 };
+            match appended.encoding {
+                Encoding::Raw => block[..block.len().min(words)].to_vec(),
+                Encoding::Base64 => prefix(block),
             }
         }
     };
@@ -745,7 +743,16 @@ mod tests {
                 &inline("Int64", "offsets", 1, "binary", &enc(Vec::new())),
             );
             check_quad(&parse(xml.as_bytes()).unwrap());
+            assert_decoded_size_is_checked(xml.as_bytes(), 88);
         }
+    }
+
+    /// The arrays of `bytes` decode to `total` bytes: a limit one byte lower refuses the file
+    /// before inflating, the exact total reads it.
+    fn assert_decoded_size_is_checked(bytes: &[u8], total: u64) {
+        check_quad(&parse_within(bytes, total).unwrap());
+        let e = parse_within(bytes, total - 1).unwrap_err();
+        assert!(e.contains("decompression bomb"), "{e}");
     }
 
     fn appended_ref(ty: &str, name: &str, comps: usize, offset: usize) -> String {
@@ -795,6 +802,7 @@ mod tests {
         let tail = format!("  <AppendedData encoding=\"base64\">\n   _{text}\n  </AppendedData>\n");
         let xml = file(r#"compressor="vtkZLibDataCompressor""#, appended_arrays(&blocks), &tail);
         check_quad(&parse(xml.as_bytes()).unwrap());
+        assert_decoded_size_is_checked(xml.as_bytes(), 88);
     }
 
     #[test]
