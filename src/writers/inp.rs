@@ -250,10 +250,9 @@ fn builtin_template(dialect: Dialect, file: &str) -> Option<&'static str> {
 /// The text of a template and where it came from: the user's folder first, then the built-in.
 fn template(fe: &FeConfig, dialect: Dialect, file: &str) -> Result<(String, String)> {
     if let Some(dir) = &fe.template_dir {
-        let path = dir.join(dialect.folder()).join(file);
-        if path.is_file() {
-            let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, "cannot read the template", e))?;
-            return Ok((text, path.display().to_string()));
+        let rel = Path::new(dialect.folder()).join(file);
+        if let Some(found) = super::template::read_user_template(dir, &rel)? {
+            return Ok(found);
         }
     }
     let text = builtin_template(dialect, file).ok_or_else(|| Error::Config(format!("no template {file}")))?;
