@@ -7,7 +7,9 @@
 //! e_circ x e_long = e_rad. Fibres lie in the circumferential-longitudinal plane at +-beta from
 //! e_circ (Holzapfel, Gasser, Ogden 2000): cos(beta) e_circ +- sin(beta) e_long.
 
-use crate::mesh::{face_centre, Region, Triad, VesselMesh, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER, FACE_UPSTREAM};
+use crate::mesh::{
+    face_centre, ElementQuality, Region, Triad, VesselMesh, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER, FACE_UPSTREAM,
+};
 use crate::quality::element_quality;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -31,21 +33,26 @@ pub fn fibre_directions(t: &Triad, beta_deg: f64) -> [Vector3<f64>; 2] {
 pub fn annotate(mesh: &mut VesselMesh) {
     let beta = |r: Region| mesh.layers.iter().find(|l| l.region == r).map(|l| l.fibre_angle_deg);
     let betas: Vec<Option<f64>> = Region::ALL.iter().map(|r| beta(*r)).collect();
-    let per_element: Vec<_> = (0..mesh.hexes.len())
-        .into_par_iter()
-        .map(|e| {
-            let c = mesh.corners(e);
-            let triad = element_triad(&c);
-            let fibres = match (mesh.regions[e].is_wall(), betas[mesh.regions[e] as usize]) {
-                (true, Some(b)) => fibre_directions(&triad, b),
-                _ => [Vector3::zeros(); 2],
-            };
-            (triad, fibres, element_quality(&c))
-        })
-        .collect();
-    mesh.triads = per_element.iter().map(|x| x.0).collect();
-    mesh.fibres = per_element.iter().map(|x| x.1).collect();
-    mesh.quality = per_element.iter().map(|x| x.2).collect();
+    // Filled in place: no per-element tuples copied into the three arrays afterwards.
+    let n = mesh.hexes.len();
+    let zero = Vector3::zeros();
+    let mut triads = vec![Triad { e_circ: zero, e_long: zero, e_rad: zero }; n];
+    let mut fibres = vec![[zero; 2]; n];
+    let mut quality = vec![ElementQuality::default(); n];
+    let m = &*mesh;
+    triads.par_iter_mut().zip(fibres.par_iter_mut()).zip(quality.par_iter_mut()).enumerate().for_each(
+        |(e, ((triad, fibre), q))| {
+            let c = m.corners(e);
+            *triad = element_triad(&c);
+            if let (true, Some(b)) = (m.regions[e].is_wall(), betas[m.regions[e] as usize]) {
+                *fibre = fibre_directions(triad, b);
+            }
+            *q = element_quality(&c);
+        },
+    );
+    mesh.triads = triads;
+    mesh.fibres = fibres;
+    mesh.quality = quality;
 }
 
 #[cfg(test)]

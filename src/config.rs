@@ -357,9 +357,14 @@ impl MeshConfig {
     /// The preset is applied first, then every key of the file, so a file can name a preset
     /// and change only what differs.
     pub fn from_case_file(path: &Path, forced_preset: Option<Preset>) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, "cannot read the case file", e))?;
-        let value: toml::Table =
-            toml::from_str(&text).map_err(|e| Error::input(path, format!("not a valid TOML case file: {e}")))?;
+        let bytes = crate::input::read_regular_file(path, MAX_CASE_FILE_BYTES, "cannot read the case file")?;
+        let text = crate::input::text_of(bytes).map_err(|e| Error::input(path, e))?;
+        let at = |e: &toml::de::Error| match e.span() {
+            Some(span) => format!("{}: ", place(&text, span.start)),
+            None => String::new(),
+        };
+        let value: toml::Table = toml::from_str(&text)
+            .map_err(|e| Error::input(path, format!("{}not valid TOML: {}", at(&e), one_line(e.message()))))?;
         let mut value = value;
         crate::writers::material::check_removed_keys(&value, path)?;
         let file_preset = match value.remove("preset") {
@@ -371,10 +376,34 @@ impl MeshConfig {
         let base = toml::Value::try_from(MeshConfig::preset(preset))
             .map_err(|e| Error::Config(format!("internal: cannot serialise preset: {e}")))?;
         let merged = merge(base, toml::Value::Table(value));
-        let config: MeshConfig = merged.try_into().map_err(|e| {
-            Error::input(path, format!("invalid case file: {e}. `vesselhex mesh --help` lists the keys"))
+        let mut config: MeshConfig = merged.try_into().map_err(|e: toml::de::Error| {
+            let (table, message, field) = error_place(&e);
+            let key: Vec<&str> = table.iter().chain(&field).map(String::as_str).collect();
+            let at = line_of_key(&text, &key).map_or(String::new(), |l| format!("line {l}: "));
+            let within = match (&field, table.is_empty()) {
+                (_, true) => String::new(),
+                (Some(_), false) => format!(" in [{}]", table.join(".")),
+                (None, false) => format!(" (`{}`)", table.join(".")),
+            };
+            Error::input(path, format!("{at}{message}{within}; `vesselhex mesh --help` lists the keys"))
         })?;
-        config.validate()?;
+        config.fe.template_dir = match config.fe.template_dir.take() {
+            Some(dir) => Some(resolve_template_dir(path, &dir).map_err(|message| {
+                let at = line_of_key(&text, &["fe", "template_dir"]).map_or(String::new(), |l| format!("line {l}: "));
+                Error::input(path, format!("{at}{message}"))
+            })?),
+            None => None,
+        };
+        config.validate().map_err(|e| match e {
+            Error::Config(message) => {
+                // Messages start with the key: "lumen.core_elements: ...", "febio.element = ...".
+                let key = message.split([':', ' ', '=']).next().unwrap_or_default();
+                let keys: Vec<&str> = key.split('.').collect();
+                let at = line_of_key(&text, &keys).map_or(String::new(), |l| format!("line {l}: "));
+                Error::input(path, format!("{at}{message}"))
+            }
+            other => other,
+        })?;
         Ok(config)
     }
 
@@ -406,25 +435,37 @@ impl MeshConfig {
             return bad("lumen.axial_spacing", "must be between 0.01 and 10 (relative to the radius)");
         }
         if let Some(h) = l.axial_spacing_mm {
-            if !(h > 0.0 && h.is_finite()) {
-                return bad("lumen.axial_spacing_mm", "must be a positive length");
+            if !(h > 0.0 && h <= MAX_LENGTH_MM) {
+                return bad("lumen.axial_spacing_mm", "must be a positive length of at most 1e6 mm");
             }
         }
         if !(l.ray_reach >= 1.5 && l.ray_reach <= 50.0) {
             return bad("lumen.ray_reach", "must be between 1.5 and 50 (relative to the radius)");
         }
         let w = &self.wall;
-        if !(w.thickness_ratio > 0.0 && w.thickness_ratio <= 2.0) {
-            return bad("wall.thickness_ratio", "must be between 0 and 2");
+        if !(w.thickness_ratio >= MIN_THICKNESS_RATIO && w.thickness_ratio <= 2.0) {
+            return bad("wall.thickness_ratio", "must be between 0.001 and 2 (relative to the radius)");
         }
         if let Some(t) = w.thickness_mm {
-            if !(t > 0.0 && t.is_finite()) {
-                return bad("wall.thickness_mm", "must be a positive length");
+            if !(t > 0.0 && t <= MAX_LENGTH_MM) {
+                return bad("wall.thickness_mm", "must be a positive length of at most 1e6 mm");
             }
         }
+        let total = w.intima.fraction + w.media.fraction + w.adventitia.fraction;
         for (name, layer) in [("intima", &w.intima), ("media", &w.media), ("adventitia", &w.adventitia)] {
-            if !(layer.fraction > 0.0 && layer.fraction.is_finite()) {
-                return bad(&format!("wall.{name}.fraction"), "must be positive");
+            if !(layer.fraction > 0.0 && layer.fraction <= 1e6) {
+                return bad(&format!("wall.{name}.fraction"), "must be positive (and at most 1e6)");
+            }
+            if layer.fraction < MIN_LAYER_SHARE * total {
+                return bad(
+                    &format!("wall.{name}.fraction"),
+                    &format!(
+                        "{} is {:.2e} of the wall once the fractions are normalised (they sum to {total}); a layer \
+                         needs at least 1 % of the wall to be meshed",
+                        layer.fraction,
+                        layer.fraction / total
+                    ),
+                );
             }
             if !(1..=50).contains(&layer.elements) {
                 return bad(&format!("wall.{name}.elements"), "must be between 1 and 50");
@@ -438,8 +479,18 @@ impl MeshConfig {
         if !(c.resample_step > 0.005 && c.resample_step <= 1.0) {
             return bad("centerline.resample_step", "must be between 0.005 and 1 (relative to the radius)");
         }
-        if c.trim_inlet < 0.0 || c.trim_outlet < 0.0 {
-            return bad("centerline.trim_inlet/trim_outlet", "must not be negative");
+        for (key, passes) in [
+            ("centerline.smoothing_passes", c.smoothing_passes),
+            ("centerline.radius_smoothing_passes", c.radius_smoothing_passes),
+        ] {
+            if passes > MAX_SMOOTHING_PASSES {
+                return bad(key, "must be at most 100000 (200 smooth over about a radius)");
+            }
+        }
+        for (key, trim) in [("centerline.trim_inlet", c.trim_inlet), ("centerline.trim_outlet", c.trim_outlet)] {
+            if !(0.0..=1000.0).contains(&trim) {
+                return bad(key, "must be between 0 and 1000 (relative to the radius)");
+            }
         }
         if !(0.0..=10.0).contains(&c.junction_merge_radii) {
             return bad("centerline.junction_merge_radii", "must be between 0 and 10 (relative to the radius)");
@@ -448,10 +499,129 @@ impl MeshConfig {
             return bad("centerline.inlet_mm", "must be a point [x, y, z] of finite numbers (mm)");
         }
         self.febio.validate()?;
+        if self.febio.static_steps > MAX_STEPS {
+            return bad("febio.static_steps", "must be at most 100000");
+        }
+        if self.febio.fsi.time_steps > MAX_STEPS {
+            return bad("febio.fsi.time_steps", "must be at most 100000");
+        }
+        for (key, p) in
+            [("fe.pressure_mmhg", self.fe.pressure_mmhg), ("febio.lumen_pressure_mmhg", self.febio.lumen_pressure_mmhg)]
+        {
+            if !(-MAX_PRESSURE_MMHG..=MAX_PRESSURE_MMHG).contains(&p) {
+                return bad(key, "must be a pressure between -10000 and 10000 mmHg");
+            }
+        }
         self.material.validate()?;
+        if let Some(dir) = &self.fe.template_dir {
+            crate::writers::template::check_template_dir(dir)?;
+        }
         crate::writers::check_format_settings(self)?;
         Ok(())
     }
+
+    /// What a user should know about settings that were accepted: fractions normalised.
+    pub fn warnings(&self) -> Vec<crate::report::Warning> {
+        let w = &self.wall;
+        let fractions = [w.intima.fraction, w.media.fraction, w.adventitia.fraction];
+        let total: f64 = fractions.iter().sum();
+        if (total - 1.0).abs() <= 1e-9 {
+            return vec![];
+        }
+        let normalised: Vec<String> = fractions.iter().map(|f| format!("{:.3}", f / total)).collect();
+        vec![crate::report::Warning::new(
+            "settings",
+            format!(
+                "the wall layer fractions {}/{}/{} (intima/media/adventitia) sum to {total}; they were normalised to {}",
+                fractions[0],
+                fractions[1],
+                fractions[2],
+                normalised.join("/")
+            ),
+        )]
+    }
+}
+
+/// Largest case file read.
+const MAX_CASE_FILE_BYTES: u64 = 1 << 20;
+/// Largest length setting in mm (a kilometre).
+const MAX_LENGTH_MM: f64 = 1e6;
+/// Thinnest wall relative to the radius, and the least share of it a layer may have: thinner
+/// gives elements flatter than a thousandth, whose Jacobians round to zero.
+const MIN_THICKNESS_RATIO: f64 = 0.001;
+const MIN_LAYER_SHARE: f64 = 0.01;
+/// Most smoothing passes (each costs a pass over the samples; 200 smooth over about a radius).
+const MAX_SMOOTHING_PASSES: usize = 100_000;
+/// Most steps of a solver deck.
+const MAX_STEPS: usize = 100_000;
+const MAX_PRESSURE_MMHG: f64 = 1e4;
+
+/// `line L, column C` of a byte offset in `text`.
+fn place(text: &str, at: usize) -> String {
+    let before = &text[..at.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    format!("line {line}, column {column}")
+}
+
+/// A message on one line.
+fn one_line(message: &str) -> String {
+    message.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" ")
+}
+
+/// Where a deserialisation error is: the key path it names (`in `lumen.radial_elements``), its
+/// message, and for an "unknown field" error the unknown key (in that path's table).
+fn error_place(e: &toml::de::Error) -> (Vec<String>, String, Option<String>) {
+    let message = one_line(e.message());
+    let shown = e.to_string();
+    let keys: Vec<String> = shown
+        .rsplit_once("in `")
+        .and_then(|(_, rest)| rest.split_once('`'))
+        .map(|(path, _)| path.split('.').map(str::to_string).collect())
+        .unwrap_or_default();
+    let field = message.strip_prefix("unknown field `").and_then(|r| r.split_once('`')).map(|(f, _)| f.to_string());
+    (keys, message, field)
+}
+
+/// The line of the key at `keys` (a table path, then the key) in the case file's text.
+fn line_of_key<S: AsRef<str>>(text: &str, keys: &[S]) -> Option<usize> {
+    let document = toml::de::DeTable::parse(text).ok()?;
+    let mut table = document.get_ref();
+    let mut span = None;
+    for (i, key) in keys.iter().enumerate() {
+        let (k, v) = table.get_key_value(key.as_ref())?;
+        span = Some(k.span());
+        if i + 1 < keys.len() {
+            match v.get_ref() {
+                toml::de::DeValue::Table(t) => table = t,
+                _ => return None,
+            }
+        }
+    }
+    let at = span?.start;
+    Some(text[..at.min(text.len())].matches('\n').count() + 1)
+}
+
+/// `fe.template_dir` as written in a case file: relative to the case file's folder, which it
+/// must not leave (an absolute path is taken as given).
+fn resolve_template_dir(case_file: &Path, dir: &Path) -> std::result::Result<std::path::PathBuf, String> {
+    if dir.is_absolute() {
+        return Ok(dir.to_path_buf());
+    }
+    let base = case_file.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let resolved = base.join(dir);
+    let (Ok(real_base), Ok(real)) = (base.canonicalize(), resolved.canonicalize()) else {
+        return Ok(resolved); // missing: validate names it
+    };
+    if !real.starts_with(&real_base) {
+        return Err(format!(
+            "fe.template_dir = \"{}\" leads out of the case file's folder (to {}); keep the templates in a folder \
+             beside the case file, or give an absolute path",
+            dir.display(),
+            real.display()
+        ));
+    }
+    Ok(resolved)
 }
 
 /// Recursively overlays `top` on `base` (tables merge key by key, anything else replaces).

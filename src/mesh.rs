@@ -235,6 +235,23 @@ impl VesselMesh {
     pub fn outlets(&self) -> impl Iterator<Item = &VesselEnd> {
         self.ends.iter().filter(|e| !e.is_inlet)
     }
+    /// Bytes the mesh holds on the heap (its arrays and sets, as allocated): the memory a run
+    /// needs for the mesh itself, whatever the writers add.
+    pub fn heap_bytes(&self) -> usize {
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        let sets: usize = self.node_sets.iter().map(|(k, v)| k.capacity() + bytes(v)).sum::<usize>()
+            + self.face_sets.iter().map(|(k, v)| k.capacity() + bytes(v)).sum::<usize>();
+        bytes(&self.nodes)
+            + bytes(&self.hexes)
+            + bytes(&self.regions)
+            + bytes(&self.branch_of)
+            + bytes(&self.triads)
+            + bytes(&self.fibres)
+            + bytes(&self.quality)
+            + sets
+    }
 }
 
 /// The unit cube [0,1]^3 in canonical order: the reference element of the face and corner tables.

@@ -8,24 +8,29 @@ use crate::centerline::Branch;
 use crate::centerline::{CenterlineTree, ForcedMerge};
 use crate::config::{MeshConfig, WallGrowth};
 use crate::error::{Error, Result};
-use crate::input::{clean_surface, read_centerlines, read_surface, Centerlines, HygieneReport, TriangleSurface};
+use crate::input::{
+    clean_surface, read_centerlines_within, read_surface_within, Centerlines, HygieneReport, ReadLimits, TriangleSurface,
+};
 use crate::junction::{
     allowed_turns, analyse_junctions, branch_core_dims, check_junction_spacing, equal_cells, find_junction_overlap,
     fold_normal, signed_angle, twist_frames, unanalysable_close_junction, FoldEnd, JunctionGeometry,
 };
 use crate::mesh::VesselMesh;
+use crate::output::OutputFolder;
 use crate::progress::Progress;
 use crate::projection::{clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
 use crate::quality::Stats;
 use crate::report::{
     bar_warnings, lumen_report, wall_report, BranchReport, InputReport, JunctionReport, Report, Warning,
 };
+use crate::resources::short;
 use crate::surface::LumenSurface;
 use crate::volume::{
     build_volume, JunctionOptimisation, JunctionVariant, JunctionWall, RadialLevels, VolumeInputs, QUALITY_BAR_SJ,
     WALL_MEAN_BAR_SJ,
 };
 use crate::writers::{self, WriteOptions};
+use nalgebra::Point3;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -220,12 +225,91 @@ const UNIT_MISMATCH_FACTOR: f64 = 8.0;
 /// Checks that the centerline radius matches the distance from the centerline to the surface;
 /// a factor of 10, 100 or 1000 means the two files are in different units.
 fn check_units(surface: &LumenSurface, tree: &CenterlineTree, centerline_source: &Path) -> Result<()> {
-    let mut ratios: Vec<f64> = tree
+    let samples: Vec<(Point3<f64>, f64)> = tree
         .branches
         .iter()
         .flat_map(|b| b.samples.iter().step_by((b.samples.len() / 50).max(1)))
-        .map(|s| surface.closest(&s.point).distance / s.radius)
+        .map(|s| (s.point, s.radius))
         .collect();
+    check_radius_against_surface(surface, &samples, centerline_source)
+}
+
+/// [`check_units`] and a coarse [`check_inside`] on the centerline file's own points, before
+/// the tree is built: a branched vessel's junctions are analysed with the tree, and centerlines
+/// in the wrong units (or another vessel's) would be refused there for a junction's shape, not
+/// for what is wrong.
+fn check_centerline_file(surface: &LumenSurface, centerlines: &Centerlines) -> Result<()> {
+    let source = &centerlines.source;
+    // Points from the middle four fifths of each polyline (open ends may lie outside).
+    let probes: Vec<(Point3<f64>, Option<f64>)> = centerlines
+        .polylines
+        .iter()
+        .flat_map(|l| {
+            let n = l.points.len();
+            (1..=8).map(move |k| {
+                let i = (n - 1) * (1 + k) / 10;
+                (l.points[i], l.radii.as_ref().map(|r| r[i]))
+            })
+        })
+        .collect();
+    let step = (probes.len() / 64).max(1);
+    let probes: Vec<_> = probes.into_iter().step_by(step).collect();
+    let samples: Vec<(Point3<f64>, f64)> =
+        probes.iter().filter_map(|(p, r)| r.filter(|r| *r > 0.0).map(|r| (*p, r))).collect();
+    if !samples.is_empty() {
+        check_radius_against_surface(surface, &samples, source)?;
+    }
+    let outside: Vec<&Point3<f64>> = probes
+        .par_iter()
+        .filter(|(p, _)| surface.winding_number(p).abs() < INSIDE_WINDING)
+        .map(|(p, _)| p)
+        .collect::<Vec<_>>();
+    if 2 * outside.len() > probes.len() {
+        check_winding(surface)?;
+        let p = outside[0];
+        let points = centerlines.polylines.iter().flat_map(|l| l.points.iter());
+        let spans = extent(points) / extent(surface.vertices.iter());
+        let scale = if !(0.25..=4.0).contains(&spans) {
+            format!(" (it spans {} times the surface's extent)", short(spans))
+        } else {
+            String::new()
+        };
+        return Err(Error::input(
+            source,
+            format!(
+                "most of the centerline lies outside the lumen surface {} ({} of {} points probed, e.g. ({:.3}, \
+                 {:.3}, {:.3}) mm){scale}: the files are in different units or coordinate systems (--units, \
+                 --centerline-units), or the centerline is not this vessel's",
+                surface.source.display(),
+                outside.len(),
+                probes.len(),
+                p.x,
+                p.y,
+                p.z
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The diagonal of the points' bounding box.
+fn extent<'a>(points: impl Iterator<Item = &'a Point3<f64>>) -> f64 {
+    let (mut lo, mut hi) = (Point3::from([f64::INFINITY; 3]), Point3::from([f64::NEG_INFINITY; 3]));
+    for p in points {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    (hi - lo).norm()
+}
+
+/// The median of distance to the surface over radius at `samples` (point, radius) must be
+/// within [`UNIT_MISMATCH_FACTOR`] of 1.
+fn check_radius_against_surface(
+    surface: &LumenSurface,
+    samples: &[(Point3<f64>, f64)],
+    centerline_source: &Path,
+) -> Result<()> {
+    let mut ratios: Vec<f64> = samples.par_iter().map(|(p, r)| surface.closest(p).distance / r).collect();
     ratios.sort_by(f64::total_cmp);
     let median = ratios[ratios.len() / 2];
     if !(median < UNIT_MISMATCH_FACTOR && median > 1.0 / UNIT_MISMATCH_FACTOR) {
@@ -270,6 +354,7 @@ fn check_inside(surface: &LumenSurface, tree: &CenterlineTree, centerline_source
     let total: f64 = w.iter().sum();
     if let Some((k, wk)) = w.iter().enumerate().find(|(_, x)| x.abs() < INSIDE_WINDING) {
         let outside = w.iter().filter(|x| x.abs() < INSIDE_WINDING).count();
+        check_winding(surface)?;
         let p = probes[k];
         return Err(Error::input(
             centerline_source,
@@ -289,6 +374,63 @@ fn check_inside(surface: &LumenSurface, tree: &CenterlineTree, centerline_source
     Ok(total > 0.0)
 }
 
+/// Refuses a surface whose triangles are not wound consistently: its winding numbers cannot
+/// tell inside from outside, so a centerline found "outside" may not be.
+fn check_winding(surface: &LumenSurface) -> Result<()> {
+    match winding_fault(&surface.triangles) {
+        Some((fault, _)) => Err(Error::input(&surface.source, fault)),
+        None => Ok(()),
+    }
+}
+
+/// What is wrong with the triangles' winding, and the share of shared edges it concerns, if
+/// some shared edges are run the same way by both their triangles.
+fn winding_fault(triangles: &[[u32; 3]]) -> Option<(String, f64)> {
+    let (misoriented, shared) = misoriented_edges(triangles);
+    (misoriented > 0).then(|| {
+        let fault = format!(
+            "the surface's triangles are not wound consistently ({misoriented} of its {shared} shared edges are run \
+             the same way by both their triangles), so vesselhex cannot tell the lumen's inside from its outside: \
+             orient the triangles consistently (e.g. ParaView's Generate Surface Normals with Consistency on, or \
+             MeshLab's Re-Orient all faces coherently) and save again"
+        );
+        (fault, misoriented as f64 / shared as f64)
+    })
+}
+
+/// Share of a surface's shared edges run the same way by both triangles beyond which a failed
+/// run is put down to the winding (a few are non-manifold fins, as in some real surfaces).
+const MISWOUND_SHARE: f64 = 0.01;
+
+/// A meshing error on a surface whose triangles are wound inconsistently names the winding
+/// first: rays then meet the wall "from outside" and winding numbers mislead, whatever stage
+/// stops.
+fn name_winding(error: Error, surface: &TriangleSurface) -> Error {
+    if matches!(error, Error::Config(_)) {
+        return error;
+    }
+    match winding_fault(&surface.triangles) {
+        Some((fault, share)) if share > MISWOUND_SHARE => {
+            Error::input(&surface.source, format!("{fault} (meshing stopped: {error})"))
+        }
+        _ => error,
+    }
+}
+
+/// Edges of the triangles run the same way by two of them (each triangle of a consistently
+/// wound surface runs a shared edge against its neighbour), and the edges two triangles share.
+fn misoriented_edges(triangles: &[[u32; 3]]) -> (usize, usize) {
+    let mut directed: std::collections::HashMap<(u32, u32), u32> = std::collections::HashMap::new();
+    for t in triangles {
+        for k in 0..3 {
+            *directed.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
+        }
+    }
+    let misoriented = directed.values().filter(|&&n| n > 1).count();
+    let shared = directed.keys().filter(|(a, b)| a < b && directed.contains_key(&(*b, *a))).count() + misoriented;
+    (misoriented, shared)
+}
+
 /// Meshes a vessel from its surface and centerlines (both already in mm).
 pub fn mesh_vessel(
     surface: &TriangleSurface,
@@ -299,6 +441,7 @@ pub fn mesh_vessel(
     config.validate()?;
     progress.stage("surface index");
     let lumen_surface = LumenSurface::new(surface)?;
+    check_centerline_file(&lumen_surface, centerlines)?;
     progress.stage("centerline");
     let tree = CenterlineTree::build(centerlines, &config.centerline, Some(&lumen_surface))?;
     let overlap = match analyse_junctions(&tree, &lumen_surface) {
@@ -603,65 +746,24 @@ pub struct MeshRequest {
     /// How to compute the centerlines when none are given (inlet, extra ends).
     pub extraction: crate::centerline_extract::ExtractOptions,
     pub config: MeshConfig,
+    /// The case file the configuration came from, if any (an input like the others: never in a
+    /// folder the run replaces).
+    pub case_file: Option<PathBuf>,
     pub output: PathBuf,
+    /// Replace an output folder vesselhex did not write (see [`crate::output`]).
+    pub force: bool,
+    /// The memory the run may plan to use: a mesh estimated to need more is refused before it
+    /// is built, and files larger than a tenth of it are not read.
+    pub max_memory: u64,
     pub quiet: bool,
     /// Zero the timings so that report.json is byte-identical between runs.
     pub reproducible: bool,
+    /// Warnings found before the run (on the command line's settings), reported with the rest.
+    pub warnings: Vec<Warning>,
 }
 
-/// The staging folder inside the output folder; removed on failure, emptied into the output
-/// folder on success.
-struct Staging {
-    dir: PathBuf,
-    output: PathBuf,
-    created_output: bool,
-    done: bool,
-}
-
-impl Staging {
-    fn new(output: &Path) -> Result<Staging> {
-        let created_output = !output.exists();
-        std::fs::create_dir_all(output)
-            .map_err(|e| Error::io(output, "cannot create the output folder (choose another --output)", e))?;
-        let dir = output.join(format!(".vesselhex-partial-{}", std::process::id()));
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| Error::io(output, "cannot write in the output folder (choose another --output)", e))?;
-        Ok(Staging { dir, output: output.to_path_buf(), created_output, done: false })
-    }
-
-    /// Moves every written entry into the output folder, replacing older ones.
-    fn commit(mut self) -> Result<()> {
-        let entries = std::fs::read_dir(&self.dir).map_err(|e| Error::io(&self.dir, "cannot list", e))?;
-        let mut names: Vec<_> = entries.filter_map(|e| e.ok().map(|e| e.file_name())).collect();
-        names.sort();
-        for name in names {
-            let to = self.output.join(&name);
-            if to.is_dir() {
-                std::fs::remove_dir_all(&to).map_err(|e| Error::io(&to, "cannot replace", e))?;
-            }
-            std::fs::rename(self.dir.join(&name), &to).map_err(|e| Error::io(&to, "cannot move into place", e))?;
-        }
-        std::fs::remove_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, "cannot remove", e))?;
-        self.done = true;
-        Ok(())
-    }
-}
-
-impl Drop for Staging {
-    fn drop(&mut self) {
-        if !self.done {
-            let _ = std::fs::remove_dir_all(&self.dir);
-            if self.created_output {
-                let _ = std::fs::remove_dir(&self.output);
-            }
-        }
-    }
-}
-
-/// Runs the whole job and returns the report (also written as report.json).
-pub fn run(request: &MeshRequest) -> Result<Report> {
-    let config = &request.config;
-    config.validate()?;
+/// The formats to write, in writing order (those `fsi` implies first), all known.
+fn formats_to_write(config: &MeshConfig) -> Result<Vec<&str>> {
     let mut formats: Vec<&str> = config.formats.iter().map(|s| s.as_str()).collect();
     // The FSI package refers to the openfoam and calculix outputs: write them first.
     if let Some(i) = formats.iter().position(|f| *f == "fsi") {
@@ -679,27 +781,53 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
             )));
         }
     }
-    let staging = Staging::new(&request.output)?;
+    Ok(formats)
+}
+
+/// Runs the whole job and returns the report (also written as report.json). The outputs are
+/// written beside `--output` and put in its place in one rename at the end (see
+/// [`crate::output`]); on any error, nothing is left behind.
+pub fn run(request: &MeshRequest) -> Result<Report> {
+    let config = &request.config;
+    config.validate()?;
+    let formats = formats_to_write(config)?;
+    let inputs: Vec<&Path> = [Some(&request.surface), request.centerlines.as_ref(), request.case_file.as_ref()]
+        .into_iter()
+        .flatten()
+        .chain(config.fe.template_dir.as_ref())
+        .map(PathBuf::as_path)
+        .collect();
+    let output = OutputFolder::claim(&request.output, &inputs, request.force)?;
+    let limits = ReadLimits::within(request.max_memory);
+    let mut warnings = request.warnings.clone();
+    warnings.extend(config.warnings());
     let mut progress = Progress::new(request.quiet, 9);
     progress.stage("reading");
-    let (surface, hygiene) = clean_surface(read_surface(&request.surface, config.units)?)?;
-    let mut warnings: Vec<Warning> = hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)).collect();
+    let (surface, hygiene) = clean_surface(read_surface_within(&request.surface, config.units, &limits)?.0)?;
+    warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
+    let centerline_units = request.centerline_units.unwrap_or(config.units);
     let (centerlines, centerline_path) = match &request.centerlines {
-        Some(path) => (read_centerlines(path, request.centerline_units.unwrap_or(config.units))?, path.clone()),
+        Some(path) => (read_centerlines_within(path, centerline_units, &limits)?, path.clone()),
         None => {
             let extraction = crate::centerline_extract::extract_centerlines(&surface, &request.extraction)?;
             warnings.extend(extraction.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
             (extraction.centerlines, PathBuf::from("(computed from the surface)"))
         }
     };
-    let meshed = mesh_vessel(&surface, &centerlines, config, &mut progress)?;
+    let radius = crate::resources::median_radius(&centerlines, &surface);
+    check_lengths_against_radius(config, radius)?;
+    warnings.extend(unit_warning(radius, config.units, request.centerline_units));
+    let estimate = crate::resources::estimate_mesh(&centerlines, radius, config, surface.triangles.len());
+    crate::resources::check_fits(&estimate, request.max_memory, &centerline_path)?;
+    let meshed = mesh_vessel(&surface, &centerlines, config, &mut progress).map_err(|e| name_winding(e, &surface))?;
 
     progress.stage("writing");
+    output.begin_writing()?;
     let options = WriteOptions::from_config(config);
     let mut outputs = Vec::new();
     for f in &formats {
         let write = writers::writer(f).expect("checked above");
-        outputs.extend(write(&meshed.mesh, &options, &staging.dir)?);
+        outputs.extend(write(&meshed.mesh, &options, output.staging())?);
     }
     progress.finish();
     let mut report = build_report(&meshed, &surface, &centerline_path, config, &progress.timings, warnings);
@@ -707,13 +835,78 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     if request.reproducible {
         report.timings_s.values_mut().for_each(|t| *t = 0.0);
     }
-    outputs.push(PathBuf::from("report.json"));
+    // report.json lists every file written: it is also what marks the folder as vesselhex's.
+    outputs.push(PathBuf::from(crate::output::MARKER));
     report.outputs = outputs.iter().map(|p| p.display().to_string()).collect();
     let json = serde_json::to_string_pretty(&report)
         .map_err(|e| Error::Config(format!("internal: cannot encode the report: {e}")))?;
-    writers::write_atomic(&staging.dir.join("report.json"), |w| w.write_all(json.as_bytes()))?;
-    staging.commit()?;
+    writers::write_atomic(&output.staging().join(crate::output::MARKER), |w| w.write_all(json.as_bytes()))?;
+    output.commit()?;
     Ok(report)
+}
+
+/// Vessel radii (mm) outside which the units are probably wrong: a 50 um arteriole to a 30 mm
+/// aneurysm.
+const PLAUSIBLE_RADIUS_MM: (f64, f64) = (0.05, 30.0);
+
+/// A warning when the vessel's median radius (mm) is implausible in the units given, naming the
+/// unit that would make it plausible.
+fn unit_warning(
+    radius: f64,
+    units: crate::units::LengthUnit,
+    centerline_units: Option<crate::units::LengthUnit>,
+) -> Option<Warning> {
+    use crate::units::LengthUnit;
+    let (low, high) = PLAUSIBLE_RADIUS_MM;
+    if !radius.is_finite() || (low..=high).contains(&radius) {
+        return None;
+    }
+    let flag = match centerline_units {
+        Some(c) if c != units => format!("--units {units} and --centerline-units {c}"),
+        _ => format!("--units {units}"),
+    };
+    // The unit under which the radius is nearest a typical 3 mm artery.
+    let in_file = radius / units.to_mm();
+    let likely = [LengthUnit::Um, LengthUnit::Mm, LengthUnit::Cm, LengthUnit::M]
+        .into_iter()
+        .filter(|u| (low..=high).contains(&(in_file * u.to_mm())))
+        .min_by(|a, b| {
+            let off = |u: &LengthUnit| (in_file * u.to_mm() / 3.0).ln().abs();
+            off(a).total_cmp(&off(b))
+        });
+    let hint = match likely {
+        Some(u) => {
+            format!("; if the files are in {u}, give --units {u} (a radius of {} mm)", short(in_file * u.to_mm()))
+        }
+        None => String::new(),
+    };
+    Some(Warning::new(
+        "units",
+        format!(
+            "the vessel's median radius is {} mm with {flag}, outside the {low}-{high} mm of blood vessels{hint}",
+            short(radius)
+        ),
+    ))
+}
+
+/// Refuses absolute lengths out of proportion with the vessel (the relative settings' bounds,
+/// applied to the median radius): a wall thicker than twice the radius or thinner than a
+/// thousandth of it, an axial spacing below a hundredth of the radius or above ten radii.
+fn check_lengths_against_radius(config: &MeshConfig, radius: f64) -> Result<()> {
+    if !(radius > 0.0 && radius.is_finite()) {
+        return Ok(());
+    }
+    let check = |key: &str, value: Option<f64>, (low, high): (f64, f64), relative: &str| match value {
+        Some(v) if !(v >= low * radius && v <= high * radius) => Err(Error::Config(format!(
+            "{key} = {v} mm is {} times the vessel's median radius ({} mm); it must be between {low} and {high} \
+             times it (as {relative} is): give it in mm, or check the input's units",
+            short(v / radius),
+            short(radius)
+        ))),
+        _ => Ok(()),
+    };
+    check("wall.thickness_mm", config.wall.thickness_mm, (0.001, 2.0), "wall.thickness_ratio")?;
+    check("lumen.axial_spacing_mm", config.lumen.axial_spacing_mm, (0.01, 10.0), "lumen.axial_spacing")
 }
 
 fn end_kind(end: &crate::projection::BranchEnd) -> &'static str {

@@ -4,8 +4,8 @@
 
 mod common;
 
+use common::{ccx_available, frd_displacements, inner_radial, lumen_normal_motion, solve_calculix};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use vesselhex::config::MeshConfig;
 use vesselhex::mesh::{sets, VesselMesh};
 use vesselhex::testing::straight_tube_mesh;
@@ -39,114 +39,6 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-fn ccx_available() -> bool {
-    let found = Command::new("ccx").arg("-v").output().is_ok();
-    if !found {
-        if std::env::var("CI").map(|v| v == "true").unwrap_or(false) {
-            panic!("ccx is not installed but CI=true: install calculix-ccx");
-        }
-        eprintln!("skipped: ccx is not installed");
-    }
-    found
-}
-
-/// What one ccx run left behind; its scratch directory goes when the run is dropped, unless a
-/// check failed.
-struct Run {
-    dir: PathBuf,
-    log: String,
-}
-
-impl Drop for Run {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            eprintln!("kept for a look: {}", self.dir.display());
-        } else if let Some(scratch) = self.dir.parent() {
-            let _ = std::fs::remove_dir_all(scratch);
-        }
-    }
-}
-
-/// Writes the deck of `mesh` and runs ccx on it; requires `Job finished`, exit 0, no warning.
-fn solve(mesh: &VesselMesh, options: &WriteOptions, name: &str) -> Run {
-    let dir = scratch(name);
-    let files = write_calculix(mesh, options, &dir).unwrap();
-    assert_eq!(files, vec![PathBuf::from("calculix/model.inp")]);
-    let job = dir.join("calculix");
-    let started = std::time::Instant::now();
-    let out = Command::new("ccx").args(["-i", "model"]).current_dir(&job).env("OMP_NUM_THREADS", "1").output().unwrap();
-    let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    let sta = std::fs::read_to_string(job.join("model.sta")).unwrap_or_default();
-    eprintln!(
-        "{name}: ccx exit {:?} in {:.1} s; {} wall elements\n{}\n{}",
-        out.status.code(),
-        started.elapsed().as_secs_f64(),
-        mesh.wall_range().len(),
-        log.lines()
-            .filter(|l| l.contains("Job finished") || l.contains("Total CalculiX Time") || l.contains("increment"))
-            .collect::<Vec<_>>()
-            .join("\n"),
-        sta
-    );
-    assert!(out.status.success(), "{name}: ccx failed:\n{log}");
-    assert!(log.contains("Job finished"), "{name}: no 'Job finished':\n{log}");
-    let warnings: Vec<&str> = log.lines().filter(|l| l.contains("*WARNING") || l.contains("*ERROR")).collect();
-    assert!(warnings.is_empty(), "{name}: ccx warned:\n{}", warnings.join("\n"));
-    // Both steps (toe, then on to the full pressure) ran to their end: the last converged
-    // increment is step 2's, at step time 1.
-    let last: Vec<f64> = sta
-        .lines()
-        .filter_map(|l| l.split_whitespace().map(|f| f.parse::<f64>()).collect::<Result<Vec<f64>, _>>().ok())
-        .rfind(|f| f.len() == 7)
-        .unwrap_or_else(|| panic!("{name}: no converged increment in the .sta:\n{sta}"));
-    assert!(
-        last[0] == 2.0 && (last[5] - 1.0).abs() < 1e-9,
-        "{name}: the step did not end at the full pressure:\n{sta}"
-    );
-    Run { dir: job, log }
-}
-
-/// Displacements of the last increment in the ASCII .frd: node label -> (ux, uy, uz).
-fn frd_displacements(dir: &Path) -> std::collections::HashMap<u64, [f64; 3]> {
-    let text = std::fs::read_to_string(dir.join("model.frd")).unwrap();
-    let mut last = std::collections::HashMap::new();
-    let mut current: Option<std::collections::HashMap<u64, [f64; 3]>> = None;
-    for line in text.lines() {
-        if line.starts_with(" -4") {
-            current = line.contains("DISP").then(std::collections::HashMap::new);
-        } else if line.starts_with(" -3") {
-            if let Some(c) = current.take() {
-                last = c;
-            }
-        } else if let (Some(c), true) = (current.as_mut(), line.starts_with(" -1")) {
-            let node: u64 = line[3..13].trim().parse().unwrap();
-            let v: Vec<f64> = (0..3).map(|k| line[13 + 12 * k..25 + 12 * k].trim().parse().unwrap()).collect();
-            c.insert(node, [v[0], v[1], v[2]]);
-        }
-    }
-    assert!(!last.is_empty(), "no DISP block in the .frd");
-    last
-}
-
-/// Mean radial displacement and mean radius of the interface nodes away from the ends.
-fn inner_radial(mesh: &VesselMesh, disp: &std::collections::HashMap<u64, [f64; 3]>) -> (f64, f64, f64) {
-    let interface = &mesh.node_sets[sets::INTERFACE_NODES];
-    let (mut sum_u, mut sum_r, mut min_u, mut n) = (0.0, 0.0, f64::INFINITY, 0.0);
-    for &i in interface {
-        let p = mesh.nodes[i as usize];
-        let r = p.x.hypot(p.y);
-        let u = disp[&(i as u64 + 1)];
-        let ur = (u[0] * p.x + u[1] * p.y) / r;
-        min_u = min_u.min(ur);
-        if p.z > 5.0 && p.z < 25.0 {
-            sum_u += ur;
-            sum_r += r;
-            n += 1.0;
-        }
-    }
-    (sum_u / n, sum_r / n, min_u)
-}
-
 #[test]
 fn default_fibre_deck_runs_and_every_lumen_node_moves_outward() {
     if !ccx_available() {
@@ -155,7 +47,7 @@ fn default_fibre_deck_runs_and_every_lumen_node_moves_outward() {
     // 48 around x 30 axial x 3 layers = 4320 wall elements.
     let mesh = tube(48, 1.0, 0.4, 1, None);
     let options = WriteOptions::default();
-    let run = solve(&mesh, &options, "default");
+    let run = solve_calculix(&mesh, &options, "default");
     assert!(run.log.contains("Job finished"));
     let disp = frd_displacements(&run.dir);
     let interface = &mesh.node_sets[sets::INTERFACE_NODES];
@@ -198,7 +90,7 @@ fn linear_elastic_tube_matches_lame() {
         l.youngs_modulus_kpa = 1e3 * e;
         l.poisson_ratio = nu;
     }
-    let run = solve(&mesh, &options, "lame");
+    let run = solve_calculix(&mesh, &options, "lame");
     let disp = frd_displacements(&run.dir);
     let (got, a, _) = inner_radial(&mesh, &disp);
     let outer = &mesh.node_sets[sets::OUTER_WALL_NODES];
@@ -231,7 +123,7 @@ fn circumferential_fibres_stiffen_the_inflation_more_than_axial_ones() {
     for beta in [0.0, 90.0] {
         // 32 around x 30 axial x 3 layers = 2880 wall elements.
         let mesh = tube(32, 1.0, 0.4, 1, Some([beta; 3]));
-        let run = solve(&mesh, &options, &format!("beta{beta}"));
+        let run = solve_calculix(&mesh, &options, &format!("beta{beta}"));
         let disp = frd_displacements(&run.dir);
         let (u, r, min_u) = inner_radial(&mesh, &disp);
         eprintln!(
@@ -314,7 +206,7 @@ fn quadratic_deck_runs() {
     let mut options = WriteOptions::default();
     options.fe.calculix_element = ElementType::C3D20;
     options.fe.material = MaterialModel::LinearElastic;
-    let run = solve(&mesh, &options, "c3d20");
+    let run = solve_calculix(&mesh, &options, "c3d20");
     let disp = frd_displacements(&run.dir);
     let (_, _, min_u) = inner_radial(&mesh, &disp);
     assert!(min_u > 0.0);
@@ -365,7 +257,7 @@ fn multi_outlet_deck_holds_every_end_about_its_own_axis() {
     if !ccx_available() {
         return;
     }
-    let run = solve(&mesh, &options, "multi");
+    let run = solve_calculix(&mesh, &options, "multi");
     let disp = frd_displacements(&run.dir);
     let largest = disp.values().map(|u| nalgebra::Vector3::from(*u).norm()).fold(0.0, f64::max);
     let mut worst: f64 = 0.0;
@@ -404,26 +296,6 @@ fn multi_outlet_deck_holds_every_end_about_its_own_axis() {
     }
 }
 
-/// Every lumen-surface node off the end rings with its displacement along the lumen surface's
-/// outward normal there (from the lumen elements' outer faces), in node order.
-fn lumen_normal_motion(mesh: &VesselMesh, disp: &std::collections::HashMap<u64, [f64; 3]>) -> Vec<(u32, f64)> {
-    let mut normal: std::collections::HashMap<u32, nalgebra::Vector3<f64>> = Default::default();
-    for f in &mesh.face_sets[sets::LUMEN_WALL_FACES] {
-        let q = vesselhex::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
-        let a = vesselhex::mesh::quad_area_vector(q.map(|n| mesh.nodes[n as usize]));
-        for n in q {
-            *normal.entry(n).or_insert_with(nalgebra::Vector3::zeros) += a;
-        }
-    }
-    let ends: std::collections::HashSet<u32> =
-        mesh.ends.iter().flat_map(|e| mesh.node_sets[&sets::wall_end(&e.name)].iter().copied()).collect();
-    mesh.node_sets[sets::INTERFACE_NODES]
-        .iter()
-        .filter(|i| !ends.contains(i))
-        .map(|&i| (i, nalgebra::Vector3::from(disp[&(i as u64 + 1)]).dot(&normal[&i].normalize())))
-        .collect()
-}
-
 /// Mean distance of an end's lumen ring from the end's centre.
 fn lumen_radius_at(mesh: &VesselMesh, end: &vesselhex::mesh::VesselEnd) -> f64 {
     let ring: Vec<u32> = mesh.node_sets[&sets::wall_end(&end.name)]
@@ -454,7 +326,7 @@ fn branched_y_bifurcation_deck_solves_and_inflates() {
     let options = WriteOptions::default();
     assert_eq!(options.fe.material, MaterialModel::Hgo);
     assert_eq!(options.fe.pressure_mmhg, 100.0);
-    let run = solve(&mesh, &options, "y-bifurcation");
+    let run = solve_calculix(&mesh, &options, "y-bifurcation");
     let disp = frd_displacements(&run.dir);
     // The bifurcation plane: through the three end centres.
     let c: Vec<nalgebra::Point3<f64>> = mesh.ends.iter().map(|e| e.centre).collect();
@@ -524,44 +396,6 @@ fn assert_branched_deck_solves(vessels: &Path, case: &str, surface: &str, center
         &MeshConfig::preset(vesselhex::config::Preset::Coarse),
     );
     assert!(mesh.ends.len() >= 3, "{case}: not branched");
-    let run = solve(&mesh, &WriteOptions::default(), case);
-    let disp = frd_displacements(&run.dir);
-    let motion = lumen_normal_motion(&mesh, &disp);
-    // The branch of each lumen-surface node: that of an intima element on it.
-    let mut branch_of_node = std::collections::HashMap::new();
-    for e in mesh.region_range(vesselhex::mesh::Region::Intima) {
-        for n in mesh.hexes[e] {
-            branch_of_node.entry(n).or_insert(mesh.branch_of[e] as usize);
-        }
-    }
-    let mut per_branch = vec![(0.0, 0usize); mesh.branch_names.len()];
-    for &(i, un) in &motion {
-        let b = &mut per_branch[branch_of_node[&i]];
-        b.0 += un;
-        b.1 += 1;
-    }
-    let inward = motion.iter().filter(|m| m.1 <= 0.0).count();
-    // Area stretch of every lumen-surface face (the intima's inner faces).
-    let moved = |n: u32| mesh.nodes[n as usize] + nalgebra::Vector3::from(disp[&(n as u64 + 1)]);
-    let mut stretch: Vec<f64> = mesh.face_sets[sets::WALL_LUMEN_FACES]
-        .iter()
-        .map(|f| {
-            let q = vesselhex::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
-            let before = vesselhex::mesh::quad_area_vector(q.map(|n| mesh.nodes[n as usize])).norm();
-            vesselhex::mesh::quad_area_vector(q.map(moved)).norm() / before
-        })
-        .collect();
-    stretch.sort_by(f64::total_cmp);
-    let (least, median, most) = (stretch[0], stretch[stretch.len() / 2], stretch[stretch.len() - 1]);
-    eprintln!(
-        "{case}: {} lumen nodes, {inward} move inwards; mean u.n per branch {:?} mm; lumen face area \
-         stretch {least:.3} / {median:.3} / {most:.3} (least / median / most)",
-        motion.len(),
-        per_branch.iter().map(|b| format!("{:.3e}", b.0 / b.1 as f64)).collect::<Vec<_>>(),
-    );
-    for (b, (sum, count)) in per_branch.iter().enumerate() {
-        assert!(*count > 0 && *sum > 0.0, "{case}: branch {} does not open", mesh.branch_names[b]);
-    }
-    assert!(median > 1.0, "{case}: the lumen surface does not stretch");
-    assert!(least > 0.9 && most < 1.5, "{case}: lumen face area stretch from {least:.3} to {most:.3}");
+    let run = solve_calculix(&mesh, &WriteOptions::default(), case);
+    common::assert_lumen_opens(case, &mesh, &frd_displacements(&run.dir));
 }

@@ -407,10 +407,18 @@ fn poiseuille_pressure_drop_and_flow_balance() {
 
 /// Runs a written case's Allrun; returns the solver log and the run time.
 fn allrun(case: &Path, solver: &str) -> (String, f64) {
+    allrun_with(case, solver, &[])
+}
+
+/// [`allrun`] with arguments (`["2"]`: two MPI processes). mpirun's ranks yield the processor
+/// while they wait, since the other tests share the cores.
+fn allrun_with(case: &Path, solver: &str, args: &[&str]) -> (String, f64) {
     let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
     let started = std::time::Instant::now();
     let out = Command::new("sh")
         .arg(case.join("Allrun"))
+        .args(args)
+        .env("MPIRUN_FLAGS", "--mca mpi_yield_when_idle 1")
         .env("WM_PROJECT_DIR", wm)
         .env("OMP_NUM_THREADS", "1")
         .output()
@@ -975,13 +983,51 @@ fn simplefoam_converges_on_the_symmetric_y_with_balanced_mass_and_an_even_split(
     cleanup(&run.dir);
 }
 
+/// A copy of a case that has run, as written: without its time folders after 0, its logs and
+/// its processor folders.
+fn fresh_copy(case: &Path, to: &Path) {
+    copy_dir(case, to);
+    for e in std::fs::read_dir(to).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().to_string();
+        let later_time = name.parse::<f64>().is_ok_and(|t| t > 0.0);
+        if later_time || name.starts_with("processor") {
+            std::fs::remove_dir_all(to.join(&name)).unwrap();
+        } else if name.starts_with("log.") {
+            std::fs::remove_file(to.join(&name)).unwrap();
+        }
+    }
+}
+
+/// Each outlet's share of the outflow at the latest time, in patch order.
+fn flow_split(case: &Path, poly: &PolyMesh) -> Vec<f64> {
+    let q: Vec<f64> = outlet_patches(poly).iter().map(|p| patch_flux(case, poly, &p.name)).collect();
+    let total: f64 = q.iter().sum();
+    q.iter().map(|x| x / total).collect()
+}
+
+/// True when mpirun is on the PATH (Debian's openfoam pulls in OpenMPI); panics when it is not
+/// and CI=true.
+fn mpirun_available(test: &str) -> bool {
+    let found = Command::new("sh").args(["-c", "command -v mpirun"]).output().is_ok_and(|o| o.status.success());
+    if !found {
+        assert!(!common::under_ci(), "{test}: mpirun is not installed but CI=true: apt-get install -y openmpi-bin");
+        eprintln!("{test}: parallel run skipped (mpirun not found)");
+    }
+    found
+}
+
 /// The T junction (fixtures/t_junction: parent R = 2 mm straight through, side branch R = 1 mm at
 /// 90 degrees), coarse preset, its case as written: simpleFoam converges below the case's residual
 /// criteria and the inflow equals the sum of the two outflows within 1e-6 (the bound and reason of
-/// the Y's test); both outlets take flow out of the case.
+/// the Y's test); both outlets take flow out of the case. Then the same case on two MPI processes
+/// through its Allrun (`./Allrun 2`: decomposePar into two slabs, simpleFoam under mpirun,
+/// reconstructPar): it converges to the same split between the outlets within 1e-6 (the
+/// decomposition changes the linear solvers' path, not the converged discrete solution; measured
+/// 3e-11).
 #[test]
-fn simplefoam_converges_on_the_t_junction_with_balanced_mass() {
-    if !openfoam_available("simplefoam_converges_on_the_t_junction_with_balanced_mass") {
+fn simplefoam_converges_on_the_t_junction_with_balanced_mass_serial_and_on_two_ranks() {
+    let name = "simplefoam_converges_on_the_t_junction_with_balanced_mass_serial_and_on_two_ranks";
+    if !openfoam_available(name) {
         return;
     }
     let run = run_branched_fixture("t_junction");
@@ -996,5 +1042,18 @@ fn simplefoam_converges_on_the_t_junction_with_balanced_mass() {
     );
     assert!(q_in > 0.0 && q[0] > 0.0 && q[1] > 0.0, "inflow {q_in}, outflows {q:?}");
     assert!(imbalance < 1e-6, "inflow {q_in} vs outflows {q:?}");
+
+    if mpirun_available(name) {
+        let parallel = run.dir.join("parallel");
+        fresh_copy(&run.case, &parallel);
+        let (log, seconds) = allrun_with(&parallel, "simpleFoam", &["2"]);
+        assert!(log.contains("nProcs : 2") && parallel.join("processor1").is_dir(), "not run on two processes");
+        assert!(log.contains("SIMPLE solution converged in"), "the parallel run did not converge");
+        let (serial, two) = (flow_split(&run.case, &run.poly), flow_split(&parallel, &run.poly));
+        eprintln!("t_junction on two MPI processes: split {two:?} (serial {serial:?}); Allrun 2 {seconds:.1} s");
+        for (a, b) in serial.iter().zip(&two) {
+            assert!((a - b).abs() < 1e-6, "serial split {serial:?}, on two processes {two:?}");
+        }
+    }
     cleanup(&run.dir);
 }

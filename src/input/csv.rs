@@ -7,6 +7,8 @@ use nalgebra::Point3;
 
 /// Parses the CSV text into one polyline (units untouched).
 pub(crate) fn parse(text: &str) -> Result<CenterlinePolyline, String> {
+    // A byte-order mark (spreadsheets write one) is not part of the first column's name.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut rows = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
     let (header_idx, header) = rows.next().ok_or("has no header line; the first line must be x,y,z,r")?;
     let names: Vec<String> = header.split(',').map(|s| s.trim().to_ascii_lowercase()).collect();

@@ -26,10 +26,12 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<StlMesh, String> {
             return parse_binary(&bytes[BINARY_HEADER..], n);
         }
     }
-    let text_start = bytes.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(bytes.len());
-    if bytes[text_start..].starts_with(b"solid") {
+    // A byte-order mark (some editors write one) is not part of the text.
+    let text = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let text_start = text.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(text.len());
+    if text[text_start..].starts_with(b"solid") {
         // A binary file whose header begins with "solid" is not text; if it is, it is ASCII.
-        if let Ok(text) = std::str::from_utf8(bytes) {
+        if let Ok(text) = std::str::from_utf8(text) {
             return parse_ascii(text);
         }
     }

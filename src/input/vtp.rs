@@ -16,9 +16,26 @@ use std::collections::HashMap;
 use std::io::Read;
 
 /// Parses a whole `.vtp` file.
+#[cfg(test)]
 pub(crate) fn parse(bytes: &[u8]) -> Result<PolyData, String> {
+    parse_within(bytes, u64::MAX)
+}
+
+/// Parses a whole `.vtp` file whose binary arrays hold at most `max_inflated` bytes in all once
+/// decoded: the block headers are added up before any block is inflated, so a file announcing
+/// more (a corrupt header, a decompression bomb) is refused before it takes the memory.
+pub(crate) fn parse_within(bytes: &[u8], max_inflated: u64) -> Result<PolyData, String> {
     let header = scan(bytes)?;
     let piece = header.piece.ok_or("has no <Piece> element: it holds no polydata")?;
+    let announced = header.arrays.iter().fold(0u64, |sum, spec| sum.saturating_add(announced_size(spec, &header)));
+    if announced > max_inflated {
+        return Err(format!(
+            "its binary arrays announce {} once decoded, more than the {} a run reads from one file (a tenth of \
+             --max-memory): a corrupt file or a decompression bomb; if the file is genuine, raise --max-memory",
+            crate::resources::show_bytes(announced as f64),
+            crate::resources::show_bytes(max_inflated as f64)
+        ));
+    }
     let decoded = header
         .arrays
         .iter()
@@ -403,6 +420,44 @@ fn decode_base64(text: &[u8]) -> Result<Vec<u8>, String> {
     Ok(out)
 }
 
+/// The decoded size a binary array's header announces (0 for ascii arrays, and where the header
+/// cannot be read: decoding then says what is wrong), read without inflating anything.
+fn announced_size(spec: &ArraySpec, header: &Header) -> u64 {
+    let binary = header.binary;
+    let words = 3 * binary.header_size;
+    // Base64 text is decoded in groups of four characters giving three bytes.
+    let prefix = |text: &[u8]| -> Vec<u8> {
+        let chars: Vec<u8> =
+            text.iter().copied().filter(|b| !b.is_ascii_whitespace()).take(4 * words.div_ceil(3)).collect();
+        let whole = chars.len() / 4 * 4;
+        decode_base64(&chars[..whole]).unwrap_or_default()
+    };
+    let head: Vec<u8> = match spec.format {
+        Format::Ascii => return 0,
+        Format::Binary => prefix(spec.text.as_bytes()),
+        Format::Appended => {
+            let (Some(appended), Some(offset)) = (header.appended.as_ref(), spec.offset) else { return 0 };
+            let Ok(block) = appended_slice(appended, offset) else { return 0 };
+            match appended.encoding {
+                Encoding::Raw => block[..block.len().min(words)].to_vec(),
+                Encoding::Base64 => prefix(block),
+            }
+        }
+    };
+    let word = |k: usize| header_word(&head, k * binary.header_size, binary).ok().map(|w| w as u64);
+    if !binary.compressed {
+        return word(0).unwrap_or(0);
+    }
+    match (word(0), word(1), word(2)) {
+        (Some(0), _, _) => 0,
+        (Some(blocks), Some(size), Some(last)) => {
+            let last = if last == 0 { size } else { last };
+            (blocks - 1).saturating_mul(size).saturating_add(last)
+        }
+        _ => 0,
+    }
+}
+
 /// Reads an unsigned header word of `size` bytes at `at`.
 fn header_word(bytes: &[u8], at: usize, binary: Binary) -> Result<usize, String> {
     let size = binary.header_size;
@@ -688,7 +743,16 @@ mod tests {
                 &inline("Int64", "offsets", 1, "binary", &enc(Vec::new())),
             );
             check_quad(&parse(xml.as_bytes()).unwrap());
+            assert_decoded_size_is_checked(xml.as_bytes(), 88);
         }
+    }
+
+    /// The arrays of `bytes` decode to `total` bytes: a limit one byte lower refuses the file
+    /// before inflating, the exact total reads it.
+    fn assert_decoded_size_is_checked(bytes: &[u8], total: u64) {
+        check_quad(&parse_within(bytes, total).unwrap());
+        let e = parse_within(bytes, total - 1).unwrap_err();
+        assert!(e.contains("decompression bomb"), "{e}");
     }
 
     fn appended_ref(ty: &str, name: &str, comps: usize, offset: usize) -> String {
@@ -738,6 +802,7 @@ mod tests {
         let tail = format!("  <AppendedData encoding=\"base64\">\n   _{text}\n  </AppendedData>\n");
         let xml = file(r#"compressor="vtkZLibDataCompressor""#, appended_arrays(&blocks), &tail);
         check_quad(&parse(xml.as_bytes()).unwrap());
+        assert_decoded_size_is_checked(xml.as_bytes(), 88);
     }
 
     #[test]

@@ -27,7 +27,10 @@
 //! 4.11 ran to normal termination (`docs/examples/febio_*_tube.feb`). Labels are the mesh's:
 //! node id = node index + 1, element id = element index + 1 (as in every other deck), so ids are
 //! strictly increasing; `wall.feb` writes only the nodes its elements use (FEBio builds a
-//! node-id lookup table, gaps are allowed). Facets are the mesh's face sets wound with
+//! node-id lookup table, gaps are allowed). FEBio's log numbers the rows of its node data by a
+//! node's position in `<Nodes>`, not by its id (FEBio 4.11 runs, `tests/febio_run.rs`): in
+//! `wall.feb` the two differ, and the deck says so; `fsi.feb` writes every node in id order, so
+//! there they agree. Facets are the mesh's face sets wound with
 //! [`HEX_FACES`](crate::mesh::HEX_FACES), outward from the element they belong to: the wall's lumen
 //! facets point into the lumen, so a positive pressure inflates the wall.
 //!
@@ -39,12 +42,14 @@
 
 use super::inp::MidEdges;
 use super::material::WallMaterial;
+use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{face_nodes, sets, ElementFace, Region, VesselMesh};
 use crate::units::MechanicalUnits;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
+use std::io;
 use std::path::{Path, PathBuf};
 
 /// Path of the wall deck under the output folder.
@@ -227,13 +232,19 @@ pub fn fill_template(label: &str, template: &str, values: &[(&str, String)]) -> 
 /// A number as FEBio reads it back exactly: the shortest representation that round-trips (17
 /// significant digits at most), in exponent form only for very small or very large magnitudes.
 pub fn num(x: f64) -> String {
-    let a = x.abs();
+    text_of(|t| {
+        push_num(t, x);
+    })
+}
+
+/// [`num`] appended to a text.
+fn push_num(t: &mut Text, x: f64) -> &mut Text {
     if x == 0.0 {
-        "0".into()
-    } else if (1e-4..1e15).contains(&a) {
-        format!("{x}")
+        t.byte(b'0')
+    } else if (1e-4..1e15).contains(&x.abs()) {
+        t.display(x)
     } else {
-        format!("{x:e}")
+        t.exp(x)
     }
 }
 
@@ -247,17 +258,50 @@ pub fn param(x: f64) -> String {
     }
 }
 
-/// Indented XML text with escaped attributes and text.
-struct Xml {
+/// Indented XML text with escaped attributes and text, streamed to a writer: the text goes out
+/// in pieces of [`XML_PIECE`] bytes, long lists through [`Xml::items`]. The first write error is
+/// kept and returned by [`Xml::finish`].
+struct Xml<'w> {
     out: String,
     depth: usize,
+    sink: &'w mut dyn io::Write,
+    error: Option<io::Error>,
 }
 
-impl Xml {
-    fn new() -> Self {
-        Xml { out: String::with_capacity(1 << 20), depth: 0 }
+/// Bytes of XML text gathered before they are written.
+const XML_PIECE: usize = 1 << 16;
+
+impl<'w> Xml<'w> {
+    fn new(sink: &'w mut dyn io::Write) -> Self {
+        Xml { out: String::with_capacity(2 * XML_PIECE), depth: 0, sink, error: None }
+    }
+    fn flush(&mut self) {
+        if self.error.is_none() {
+            self.error = self.sink.write_all(self.out.as_bytes()).err();
+        }
+        self.out.clear();
+    }
+    fn finish(mut self) -> io::Result<()> {
+        self.flush();
+        self.error.map_or(Ok(()), Err)
+    }
+    /// One line per item `0..n` at the current depth, formatted in blocks on every core.
+    fn items(&mut self, n: usize, item: impl Fn(&mut Text, usize) + Sync) {
+        self.flush();
+        let indent = "  ".repeat(self.depth);
+        if self.error.is_none() {
+            self.error = write_items(self.sink, n, |t, i| {
+                t.str(&indent);
+                item(t, i);
+                t.byte(b'\n');
+            })
+            .err();
+        }
     }
     fn indent(&mut self) {
+        if self.out.len() >= XML_PIECE {
+            self.flush();
+        }
         for _ in 0..self.depth {
             self.out.push_str("  ");
         }
@@ -289,6 +333,15 @@ impl Xml {
         self.tag_start(tag, attrs);
         let _ = writeln!(self.out, ">{}</{tag}>", quick_xml::escape::escape(text));
     }
+    /// `<tag attrs>a,b,c</tag>` (numbers need no escaping).
+    fn leaf_list(&mut self, tag: &str, attrs: &[(&str, &str)], labels: &[u64]) {
+        self.tag_start(tag, attrs);
+        self.out.push('>');
+        let mut t = Text::with_capacity(labels.len() * 8);
+        t.uints(labels.iter().copied(), ",");
+        self.out.push_str(std::str::from_utf8(&t.bytes).expect("ascii"));
+        let _ = writeln!(self.out, "</{tag}>");
+    }
     /// A comment; `--` is not allowed inside XML comments and is replaced.
     fn comment(&mut self, lines: &[String]) {
         self.indent();
@@ -310,19 +363,11 @@ impl Xml {
     }
 }
 
-fn comma_list(ids: impl Iterator<Item = u64>) -> String {
-    let mut s = String::new();
-    for (i, id) in ids.enumerate() {
-        if i > 0 {
-            s.push(',');
-        }
-        let _ = write!(s, "{id}");
-    }
-    s
-}
-
-fn vec_text(v: &nalgebra::Vector3<f64>) -> String {
-    format!("{},{},{}", num(v.x), num(v.y), num(v.z))
+/// `x,y,z` of a vector.
+fn push_vector<'t>(t: &'t mut Text, v: &nalgebra::Vector3<f64>) -> &'t mut Text {
+    push_num(t, v.x).byte(b',');
+    push_num(t, v.y).byte(b',');
+    push_num(t, v.z)
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -386,17 +431,15 @@ fn wall_materials(
 fn nodes(xml: &mut Xml, mesh: &VesselMesh, name: &str, which: &[u32], mids: Option<&MidEdges>, u: DeckUnits) {
     let s = u.length.from_mm();
     xml.open("Nodes", &[("name", name)]);
-    let node = |xml: &mut Xml, label: u64, p: nalgebra::Point3<f64>| {
-        xml.indent();
-        let _ = writeln!(xml.out, "<node id=\"{label}\">{},{},{}</node>", num(p.x * s), num(p.y * s), num(p.z * s));
+    let node = |t: &mut Text, label: u64, p: nalgebra::Point3<f64>| {
+        t.str("<node id=\"").uint(label).str("\">");
+        push_num(t, p.x * s).byte(b',');
+        push_num(t, p.y * s).byte(b',');
+        push_num(t, p.z * s).str("</node>");
     };
-    for &n in which {
-        node(xml, n as u64 + 1, mesh.nodes[n as usize]);
-    }
+    xml.items(which.len(), |t, i| node(t, which[i] as u64 + 1, mesh.nodes[which[i] as usize]));
     if let Some(m) = mids {
-        for k in 0..m.len() as u32 {
-            node(xml, m.label(mesh, k), m.position(mesh, k));
-        }
+        xml.items(m.len(), |t, k| node(t, m.label(mesh, k as u32), m.position(mesh, k as u32)));
     }
     xml.close("Nodes");
 }
@@ -406,15 +449,16 @@ fn nodes(xml: &mut Xml, mesh: &VesselMesh, name: &str, which: &[u32], mids: Opti
 fn elements(xml: &mut Xml, mesh: &VesselMesh, region: Region, mids: Option<&MidEdges>) {
     let kind = if mids.is_some() { FebioElement::Hex20 } else { FebioElement::Hex8 };
     xml.open("Elements", &[("type", kind.name()), ("name", region.name())]);
-    for e in mesh.region_range(region) {
-        let corners = mesh.hexes[e].iter().map(|&n| n as u64 + 1);
-        let text = match mids {
-            Some(m) => comma_list(corners.chain(m.of_element(e).iter().map(|&k| m.label(mesh, k)))),
-            None => comma_list(corners),
-        };
-        xml.indent();
-        let _ = writeln!(xml.out, "<elem id=\"{}\">{text}</elem>", e + 1);
-    }
+    let range = mesh.region_range(region);
+    xml.items(range.len(), |t, i| {
+        let e = range.start + i;
+        t.str("<elem id=\"").uint(e as u64 + 1).str("\">");
+        t.uints(mesh.hexes[e].iter().map(|&n| n as u64 + 1), ",");
+        if let Some(m) = mids {
+            t.byte(b',').uints(m.of_element(e).iter().map(|&k| m.label(mesh, k)), ",");
+        }
+        t.str("</elem>");
+    });
     xml.close("Elements");
 }
 
@@ -434,7 +478,7 @@ fn node_set(xml: &mut Xml, mesh: &VesselMesh, mids: Option<&MidEdges>, name: &st
 }
 
 fn node_set_labels(xml: &mut Xml, name: &str, labels: &[u64]) {
-    xml.leaf("NodeSet", &[("name", name)], &comma_list(labels.iter().copied()));
+    xml.leaf_list("NodeSet", &[("name", name)], labels);
 }
 
 /// `<Surface>` of facets, each wound outward from its element: `quad4`, or `quad8` (corners, then
@@ -442,17 +486,16 @@ fn node_set_labels(xml: &mut Xml, name: &str, labels: &[u64]) {
 fn surface(xml: &mut Xml, mesh: &VesselMesh, name: &str, faces: &[ElementFace], mids: Option<&MidEdges>) {
     let kind = if mids.is_some() { FebioElement::Hex20 } else { FebioElement::Hex8 };
     xml.open("Surface", &[("name", name)]);
-    for (i, f) in faces.iter().enumerate() {
+    let tag = kind.facet();
+    xml.items(faces.len(), |t, i| {
+        let f = faces[i];
         let corners = face_nodes(&mesh.hexes[f.element as usize], f.face as usize).map(|n| n as u64 + 1);
-        let text = match mids {
-            Some(m) => comma_list(
-                corners.into_iter().chain(m.of_face(f.element as usize, f.face as usize).map(|k| m.label(mesh, k))),
-            ),
-            None => comma_list(corners.into_iter()),
-        };
-        xml.indent();
-        let _ = writeln!(xml.out, "<{tag} id=\"{}\">{text}</{tag}>", i + 1, tag = kind.facet());
-    }
+        t.byte(b'<').str(tag).str(" id=\"").uint(i as u64 + 1).str("\">").uints(corners, ",");
+        if let Some(m) = mids {
+            t.byte(b',').uints(m.of_face(f.element as usize, f.face as usize).map(|k| m.label(mesh, k)), ",");
+        }
+        t.str("</").str(tag).byte(b'>');
+    });
     xml.close("Surface");
 }
 
@@ -470,17 +513,13 @@ fn mat_axes(xml: &mut Xml, mesh: &VesselMesh) {
     xml.open("MeshData", &[]);
     for region in Region::WALL {
         xml.open("ElementData", &[("type", "mat_axis"), ("elem_set", region.name())]);
-        for (lid, e) in mesh.region_range(region).enumerate() {
-            let t = &mesh.triads[e];
-            xml.indent();
-            let _ = writeln!(
-                xml.out,
-                "<elem lid=\"{}\"><a>{}</a><d>{}</d></elem>",
-                lid + 1,
-                vec_text(&t.e_circ),
-                vec_text(&t.e_long)
-            );
-        }
+        let range = mesh.region_range(region);
+        xml.items(range.len(), |t, lid| {
+            let triad = &mesh.triads[range.start + lid];
+            t.str("<elem lid=\"").uint(lid as u64 + 1).str("\"><a>");
+            push_vector(t, &triad.e_circ).str("</a><d>");
+            push_vector(t, &triad.e_long).str("</d></elem>");
+        });
         xml.close("ElementData");
     }
     xml.close("MeshData");
@@ -607,6 +646,25 @@ const DOF_NAMES: [&str; 3] = ["x", "y", "z"];
 
 /// The text of `wall.feb`.
 pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
+    deck_text(|xml| write_wall_deck(xml, mesh, options))
+}
+
+/// The text of `fsi.feb`.
+pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
+    deck_text(|xml| write_fsi_deck(xml, mesh, options))
+}
+
+/// A deck written into memory (for tests and tools; the writers stream to the file).
+fn deck_text(deck: impl FnOnce(&mut Xml) -> Result<()>) -> Result<String> {
+    let mut bytes = Vec::new();
+    let mut xml = Xml::new(&mut bytes);
+    deck(&mut xml)?;
+    xml.finish().map_err(|e| Error::Config(format!("internal: cannot render the deck: {e}")))?;
+    String::from_utf8(bytes).map_err(|e| Error::Config(format!("internal: the deck is not UTF-8: {e}")))
+}
+
+/// `wall.feb` into `xml`.
+fn write_wall_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> Result<()> {
     let cfg = &options.febio;
     cfg.validate()?;
     check_triads(mesh)?;
@@ -631,7 +689,8 @@ pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
             cfg.static_steps
         ),
         "Node id = vesselhex node index + 1, element id = element index + 1 (the same labels in every deck);".into(),
-        "only the nodes of wall elements are written.".into(),
+        "only the nodes of wall elements are written. FEBio's log numbers the rows of node data by the".into(),
+        "node's position in <Nodes> (1, 2, ...), not by these ids: logged node k is the k-th <node> below.".into(),
     ];
     for s in &supports {
         let held: Vec<&str> = (0..3).filter(|k| s.ring_dofs[*k]).map(|k| DOF_NAMES[k]).collect();
@@ -667,47 +726,46 @@ pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
         r.dedup();
     }
 
-    let mut xml = Xml::new();
-    header(&mut xml, &comment, "solid");
+    header(xml, &comment, "solid");
     let steps = cfg.static_steps;
-    control(&mut xml, TEMPLATE_CONTROL_STATIC, steps, 1.0 / steps as f64, 1e-3 / steps as f64)?;
+    control(xml, TEMPLATE_CONTROL_STATIC, steps, 1.0 / steps as f64, 1e-3 / steps as f64)?;
     xml.open("Material", &[]);
-    wall_materials(&mut xml, mesh, &options.material, u, 1)?;
+    wall_materials(xml, mesh, &options.material, u, 1)?;
     xml.close("Material");
 
     xml.open("Mesh", &[]);
-    nodes(&mut xml, mesh, "wall_nodes", &wall_nodes, mids, u);
+    nodes(xml, mesh, "wall_nodes", &wall_nodes, mids, u);
     for region in Region::WALL {
-        elements(&mut xml, mesh, region, mids);
+        elements(xml, mesh, region, mids);
     }
     for s in &supports {
         let name = sets::wall_end(&s.end);
-        node_set(&mut xml, mesh, mids, &name, node_set_of(mesh, &name)?);
+        node_set(xml, mesh, mids, &name, node_set_of(mesh, &name)?);
     }
     for (r, dof) in rigid.iter().zip(DOF_NAMES) {
         if !r.is_empty() {
-            node_set_labels(&mut xml, &format!("rigid_{dof}"), r);
+            node_set_labels(xml, &format!("rigid_{dof}"), r);
         }
     }
-    node_set(&mut xml, mesh, mids, sets::INTERFACE_NODES, node_set_of(mesh, sets::INTERFACE_NODES)?);
+    node_set(xml, mesh, mids, sets::INTERFACE_NODES, node_set_of(mesh, sets::INTERFACE_NODES)?);
     for name in [sets::WALL_LUMEN_FACES, sets::WALL_OUTER_FACES] {
-        surface(&mut xml, mesh, name, face_set_of(mesh, name)?, mids);
+        surface(xml, mesh, name, face_set_of(mesh, name)?, mids);
     }
     xml.close("Mesh");
 
     let domains: Vec<(&str, &str)> = Region::WALL.iter().map(|r| (r.name(), r.name())).collect();
-    mesh_domains(&mut xml, &domains);
-    mat_axes(&mut xml, mesh);
+    mesh_domains(xml, &domains);
+    mat_axes(xml, mesh);
 
     xml.open("Boundary", &[]);
     for s in &supports {
-        zero_displacement(&mut xml, &format!("hold_{}", s.end), &sets::wall_end(&s.end), s.ring_dofs);
+        zero_displacement(xml, &format!("hold_{}", s.end), &sets::wall_end(&s.end), s.ring_dofs);
     }
     for (k, (r, dof)) in rigid.iter().zip(DOF_NAMES).enumerate() {
         if !r.is_empty() {
             let mut dofs = [false; 3];
             dofs[k] = true;
-            zero_displacement(&mut xml, &format!("no_rigid_{dof}"), &format!("rigid_{dof}"), dofs);
+            zero_displacement(xml, &format!("no_rigid_{dof}"), &format!("rigid_{dof}"), dofs);
         }
     }
     xml.close("Boundary");
@@ -721,16 +779,16 @@ pub fn wall_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
     xml.close("Loads");
 
     xml.open("LoadData", &[]);
-    load_curve(&mut xml, 1, "pressure_ramp", "LINEAR", &[(0.0, 0.0), (1.0, 1.0)]);
+    load_curve(xml, 1, "pressure_ramp", "LINEAR", &[(0.0, 0.0), (1.0, 1.0)]);
     xml.close("LoadData");
 
-    output(&mut xml, sets::INTERFACE_NODES, &["displacement", "stress"]);
+    output(xml, sets::INTERFACE_NODES, &["displacement", "stress"]);
     xml.close("febio_spec");
-    Ok(xml.out)
+    Ok(())
 }
 
-/// The text of `fsi.feb`.
-pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
+/// `fsi.feb` into `xml`.
+fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> Result<()> {
     let cfg = &options.febio;
     cfg.validate()?;
     if cfg.element == FebioElement::Hex20 {
@@ -807,9 +865,8 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
         "Node id = vesselhex node index + 1, element id = element index + 1 (the same labels in every deck).".into(),
     ];
 
-    let mut xml = Xml::new();
-    header(&mut xml, &comment, "fluid-FSI");
-    control(&mut xml, TEMPLATE_CONTROL_FSI, f.time_steps, f.step_size_s, f.step_size_s * 1e-2)?;
+    header(xml, &comment, "fluid-FSI");
+    control(xml, TEMPLATE_CONTROL_FSI, f.time_steps, f.step_size_s, f.step_size_s * 1e-2)?;
     xml.open("Material", &[]);
     let blood = fill_template(
         TEMPLATE_BLOOD.0,
@@ -824,47 +881,47 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
         ],
     )?;
     xml.fragment(&blood);
-    wall_materials(&mut xml, mesh, &options.material, u, 2)?;
+    wall_materials(xml, mesh, &options.material, u, 2)?;
     xml.close("Material");
 
     xml.open("Mesh", &[]);
     let all: Vec<u32> = (0..mesh.nodes.len() as u32).collect();
-    nodes(&mut xml, mesh, "all_nodes", &all, None, u);
+    nodes(xml, mesh, "all_nodes", &all, None, u);
     for region in Region::ALL {
-        elements(&mut xml, mesh, region, None);
+        elements(xml, mesh, region, None);
     }
     let mut lumen_inner_sets = Vec::new();
     for end in &mesh.ends {
         let wall = sets::wall_end(&end.name);
-        node_set(&mut xml, mesh, None, &wall, node_set_of(mesh, &wall)?);
+        node_set(xml, mesh, None, &wall, node_set_of(mesh, &wall)?);
         let inner: Vec<u32> = node_set_of(mesh, &sets::lumen_end(&end.name))?
             .iter()
             .copied()
             .filter(|&n| !on_interface[n as usize])
             .collect();
         let name = format!("{}_inner", sets::lumen_end(&end.name));
-        node_set(&mut xml, mesh, None, &name, &inner);
+        node_set(xml, mesh, None, &name, &inner);
         lumen_inner_sets.push((end.name.clone(), name));
     }
-    node_set(&mut xml, mesh, None, sets::INTERFACE_NODES, interface);
-    surface(&mut xml, mesh, sets::LUMEN_WALL_FACES, face_set_of(mesh, sets::LUMEN_WALL_FACES)?, None);
+    node_set(xml, mesh, None, sets::INTERFACE_NODES, interface);
+    surface(xml, mesh, sets::LUMEN_WALL_FACES, face_set_of(mesh, sets::LUMEN_WALL_FACES)?, None);
     for end in &mesh.ends {
         let name = sets::lumen_end(&end.name);
-        surface(&mut xml, mesh, &name, face_set_of(mesh, &name)?, None);
+        surface(xml, mesh, &name, face_set_of(mesh, &name)?, None);
     }
     xml.close("Mesh");
 
     let mut domains: Vec<(&str, &str)> = vec![(Region::Lumen.name(), "blood")];
     domains.extend(Region::WALL.iter().map(|r| (r.name(), r.name())));
-    mesh_domains(&mut xml, &domains);
-    mat_axes(&mut xml, mesh);
+    mesh_domains(xml, &domains);
+    mat_axes(xml, mesh);
 
     xml.open("Boundary", &[]);
     for end in &mesh.ends {
-        zero_displacement(&mut xml, &format!("fix_wall_{}", end.name), &sets::wall_end(&end.name), [true; 3]);
+        zero_displacement(xml, &format!("fix_wall_{}", end.name), &sets::wall_end(&end.name), [true; 3]);
     }
     for (end, set) in &lumen_inner_sets {
-        zero_displacement(&mut xml, &format!("fix_lumen_{end}"), set, [true; 3]);
+        zero_displacement(xml, &format!("fix_lumen_{end}"), set, [true; 3]);
     }
     xml.open("bc", &[("name", "no_slip"), ("node_set", sets::INTERFACE_NODES), ("type", "zero fluid velocity")]);
     for tag in ["wx_dof", "wy_dof", "wz_dof"] {
@@ -917,13 +974,13 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
     xml.close("Loads");
 
     xml.open("LoadData", &[]);
-    load_curve(&mut xml, 1, "inflow_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
-    load_curve(&mut xml, 2, "outlet_pressure_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
-    load_curve(&mut xml, 3, "backflow_on", "STEP", &[(0.0, 1.0), (f.ramp_s, 1.0)]);
+    load_curve(xml, 1, "inflow_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
+    load_curve(xml, 2, "outlet_pressure_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
+    load_curve(xml, 3, "backflow_on", "STEP", &[(0.0, 1.0), (f.ramp_s, 1.0)]);
     xml.close("LoadData");
 
     output(
-        &mut xml,
+        xml,
         sets::INTERFACE_NODES,
         &[
             "displacement",
@@ -938,27 +995,41 @@ pub fn fsi_deck(mesh: &VesselMesh, options: &WriteOptions) -> Result<String> {
         ],
     );
     xml.close("febio_spec");
-    Ok(xml.out)
+    Ok(())
 }
 
-fn write_deck(dir: &Path, rel: &str, text: &str) -> Result<Vec<PathBuf>> {
+/// Streams a deck into `dir/rel`. A deck that fails midway (a template, a missing set) leaves
+/// no file: its error is kept and returned, the partial file removed.
+fn write_deck(dir: &Path, rel: &str, deck: impl FnOnce(&mut Xml) -> Result<()>) -> Result<Vec<PathBuf>> {
     let rel = PathBuf::from(rel);
     let path = dir.join(&rel);
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, "cannot create the folder", e))?;
     }
-    write_atomic(&path, |w| w.write_all(text.as_bytes()))?;
-    Ok(vec![rel])
+    let mut failure = None;
+    let written = write_atomic(&path, |w| {
+        let mut xml = Xml::new(w);
+        if let Err(e) = deck(&mut xml) {
+            let message = e.to_string();
+            failure = Some(e);
+            return Err(io::Error::other(message));
+        }
+        xml.finish()
+    });
+    match failure {
+        Some(e) => Err(e),
+        None => written.map(|()| vec![rel]),
+    }
 }
 
 /// Writer of format `febio`: `febio/wall.feb`.
 pub fn write_wall(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
-    write_deck(dir, WALL_DECK, &wall_deck(mesh, options)?)
+    write_deck(dir, WALL_DECK, |xml| write_wall_deck(xml, mesh, options))
 }
 
 /// Writer of format `febio-fsi`: `febio/fsi.feb`.
 pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
-    write_deck(dir, FSI_DECK, &fsi_deck(mesh, options)?)
+    write_deck(dir, FSI_DECK, |xml| write_fsi_deck(xml, mesh, options))
 }
 
 #[cfg(test)]

@@ -45,14 +45,15 @@
 //! with corner nodes and lumps each face's force on its four corners, so a C3D20 wall would leave
 //! its interface mid-edge nodes without force or displacement; `fe.calculix_element = C3D20*` is
 //! refused with that reason.
-//! * `Allrun`, `README.md`.
+//! * `Allrun` (`./Allrun N` runs the fluid on N MPI processes), `README.md`.
 //!
 //! Time: one fluid time step per coupling window, dt = min(1e-4 s, Courant 0.5 of the inflow);
 //! end time `openfoam.end_time` or 100 windows.
 
-use super::inp::{deck_parts, fmt_const, Dialect, EndHold};
-use super::openfoam::{end_vars, inlet_velocities, lumen_polymesh, render, EndNames, PolyMesh};
-use super::WriteOptions;
+use super::inp::{fmt_const, Dialect, EndHold, ModelData};
+use super::openfoam::{end_vars, inlet_velocities, lumen_polymesh, render, slab_axis, EndNames, PolyMesh};
+use super::text::{text_of, write_items, Text};
+use super::{write_atomic, WriteOptions};
 use crate::config::InletProfile;
 use crate::error::{Error, Result};
 use crate::mesh::{face_nodes, quad_area_vector, sets, VesselMesh};
@@ -195,8 +196,23 @@ pub fn interface_map(mesh: &VesselMesh, poly: &PolyMesh) -> Result<InterfaceMap>
 
 /// Shortest round-trip text of a float (no "-0").
 fn num(x: f64) -> String {
-    let x = if x == 0.0 { 0.0 } else { x };
-    format!("{x:?}")
+    text_of(|t| {
+        push_num(t, x);
+    })
+}
+
+/// [`num`] appended to a text.
+fn push_num(t: &mut Text, x: f64) -> &mut Text {
+    t.debug(if x == 0.0 { 0.0 } else { x })
+}
+
+/// Writes `fsi/<rel>`: a header line, then the lines of items `0..n`.
+fn write_csv(fsi: &Path, rel: &str, header: &str, n: usize, line: impl Fn(&mut Text, usize) + Sync) -> Result<PathBuf> {
+    write_atomic(&fsi.join(rel), |w| {
+        w.write_all(header.as_bytes())?;
+        write_items(w, n, line)
+    })?;
+    Ok(Path::new("fsi").join(rel))
 }
 
 fn write_file(dir: &Path, rel: &str, text: &str, executable: bool) -> Result<PathBuf> {
@@ -263,29 +279,28 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     let mut out = Vec::new();
 
     // The map.
-    let mut text = String::from("fluid_point,solid_node,x,y,z\n");
-    for n in &map.nodes {
+    out.push(write_csv(&fsi, "interface_nodes.csv", "fluid_point,solid_node,x,y,z\n", map.nodes.len(), |t, i| {
+        let n = map.nodes[i];
         let p = mesh.nodes[n.node as usize].coords * scale;
-        text.push_str(&format!("{},{},{},{},{}\n", n.fluid_point, n.solid_label(), num(p.x), num(p.y), num(p.z)));
-    }
-    out.push(write_file(&fsi, "interface_nodes.csv", &text, false)?);
-    let mut text = String::from("patch_face,face,solid_element,solid_face,area\n");
-    let mut lumping = String::from("patch_face,solid_node,weight\n");
-    for f in &map.faces {
-        text.push_str(&format!(
-            "{},{},{},S{},{}\n",
-            f.patch_face,
-            f.face,
-            f.element as u64 + 1,
-            f.solid_face + 1,
-            num(f.area_mm2 * scale * scale)
-        ));
+        t.uint(n.fluid_point as u64).byte(b',').uint(n.solid_label()).byte(b',');
+        push_num(t, p.x).byte(b',');
+        push_num(t, p.y).byte(b',');
+        push_num(t, p.z).byte(b'\n');
+    })?);
+    let faces_header = "patch_face,face,solid_element,solid_face,area\n";
+    out.push(write_csv(&fsi, "interface_faces.csv", faces_header, map.faces.len(), |t, i| {
+        let f = &map.faces[i];
+        t.uint(f.patch_face as u64).byte(b',').uint(f.face as u64).byte(b',');
+        t.uint(f.element as u64 + 1).str(",S").uint(f.solid_face as u64 + 1).byte(b',');
+        push_num(t, f.area_mm2 * scale * scale).byte(b'\n');
+    })?);
+    let lumping_header = "patch_face,solid_node,weight\n";
+    out.push(write_csv(&fsi, "force_lumping.csv", lumping_header, map.faces.len(), |t, i| {
+        let f = &map.faces[i];
         for n in f.nodes {
-            lumping.push_str(&format!("{},{},0.25\n", f.patch_face, n as u64 + 1));
+            t.uint(f.patch_face as u64).byte(b',').uint(n as u64 + 1).str(",0.25\n");
         }
-    }
-    out.push(write_file(&fsi, "interface_faces.csv", &text, false)?);
-    out.push(write_file(&fsi, "force_lumping.csv", &lumping, false)?);
+    })?);
 
     // Case values.
     let ends = EndNames::of(mesh)?;
@@ -305,8 +320,10 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
         end_patches.push_str(&render(END_PIECE.0, END_PIECE.1, &[("end", end.to_string())])?);
     }
     let windows = (end / dt).round().max(1.0) as u64;
+    let (_, slabs) = slab_axis(&poly);
     let mut vars: Vec<(&str, String)> = end_vars(&ends)?;
     vars.extend([
+        ("slabs_np", slabs("$np")),
         ("version", env!("CARGO_PKG_VERSION").to_string()),
         ("fluid", FLUID.into()),
         ("solid", SOLID.into()),
@@ -348,21 +365,10 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     // The FSI deck: the wall model in SI units + the interface set + the dynamic step.
     let mut si = options.clone();
     si.length_unit = LengthUnit::M;
-    let (model, _) = deck_parts(mesh, &si, Dialect::Calculix, EndHold::Equations)?;
+    let model = ModelData::new(mesh, &si, Dialect::Calculix, EndHold::Equations)?;
     let nset = format!("N{}", SOLID_PATCH.to_ascii_uppercase());
-    let mut deck = model;
-    deck.push_str(&format!(
-        "** preCICE interface: the lumen-wall nodes ({} nodes, = LUMEN_WALL_INTERFACE), set N + adapter patch '{}'.\n*NSET, NSET={nset}\n",
-        map.nodes.len(),
-        SOLID_PATCH
-    ));
     let mut labels: Vec<u64> = map.nodes.iter().map(|n| n.solid_label()).collect();
     labels.sort_unstable();
-    for chunk in labels.chunks(16) {
-        let line: Vec<String> = chunk.iter().map(|l| l.to_string()).collect();
-        deck.push_str(&line.join(", "));
-        deck.push('\n');
-    }
     let step = render(
         "templates/fsi/calculix/step_fsi.inp",
         STEP_TEMPLATE,
@@ -370,11 +376,26 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
             ("SOLID", SOLID.into()),
             ("TIME_WINDOW", fmt_const(dt)),
             ("END_TIME", fmt_const(end)),
-            ("NSET", nset),
+            ("NSET", nset.clone()),
             ("UNITS", crate::units::MechanicalUnits::of(LengthUnit::M).describe()),
         ],
     )?;
-    deck.push_str(&step);
-    out.push(write_file(&fsi, "calculix/fsi.inp", &deck, false)?);
+    let rel = "calculix/fsi.inp";
+    std::fs::create_dir_all(fsi.join("calculix"))
+        .map_err(|e| Error::io(fsi.join("calculix"), "cannot create the folder", e))?;
+    write_atomic(&fsi.join(rel), |w| {
+        model.write(w)?;
+        writeln!(
+            w,
+            "** preCICE interface: the lumen-wall nodes ({} nodes, = LUMEN_WALL_INTERFACE), set N + adapter patch '{}'.\n*NSET, NSET={nset}",
+            map.nodes.len(),
+            SOLID_PATCH
+        )?;
+        write_items(w, labels.len().div_ceil(16), |t, i| {
+            t.uints(labels[16 * i..(16 * i + 16).min(labels.len())].iter().copied(), ", ").byte(b'\n');
+        })?;
+        w.write_all(step.as_bytes())
+    })?;
+    out.push(Path::new("fsi").join(rel));
     Ok(out)
 }

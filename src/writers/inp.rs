@@ -55,6 +55,7 @@
 //! constants in 20-character fields). At most 16 entries per data
 //! line (C3D20 elements continue on a second line).
 
+use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{abaqus_face_label, sets, ElementFace, Region, VesselMesh, FACE_INNER, HEX_EDGES};
@@ -188,8 +189,14 @@ impl Default for FeConfig {
 
 /// A real number for a data line: 13 significant digits, at most 20 characters.
 pub fn fmt_coord(x: f64) -> String {
-    let x = if x == 0.0 { 0.0 } else { x }; // no "-0"
-    format!("{x:.12e}")
+    text_of(|t| {
+        coord(t, x);
+    })
+}
+
+/// [`fmt_coord`] appended to a text.
+fn coord(t: &mut Text, x: f64) -> &mut Text {
+    t.exp12(if x == 0.0 { 0.0 } else { x }) // no "-0"
 }
 
 /// A constant: the shortest text that reads back exactly, or `{:.12e}` when that is longer
@@ -243,10 +250,9 @@ fn builtin_template(dialect: Dialect, file: &str) -> Option<&'static str> {
 /// The text of a template and where it came from: the user's folder first, then the built-in.
 fn template(fe: &FeConfig, dialect: Dialect, file: &str) -> Result<(String, String)> {
     if let Some(dir) = &fe.template_dir {
-        let path = dir.join(dialect.folder()).join(file);
-        if path.is_file() {
-            let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, "cannot read the template", e))?;
-            return Ok((text, path.display().to_string()));
+        let rel = Path::new(dialect.folder()).join(file);
+        if let Some(found) = super::template::read_user_template(dir, &rel)? {
+            return Ok(found);
         }
     }
     let text = builtin_template(dialect, file).ok_or_else(|| Error::Config(format!("no template {file}")))?;
@@ -609,6 +615,12 @@ impl<'a> Deck<'a> {
     }
 
     fn write(&self, w: &mut dyn Write) -> std::io::Result<()> {
+        self.write_model(w)?;
+        w.write_all(self.step.as_bytes())
+    }
+
+    /// Everything before the step.
+    fn write_model(&self, w: &mut dyn Write) -> std::io::Result<()> {
         let mesh = self.mesh;
         let wall = mesh.wall_range();
         writeln!(w, "*HEADING")?;
@@ -630,28 +642,38 @@ impl<'a> Deck<'a> {
             "** Local axes per element: 1 = circumferential, 2 = longitudinal (inlet to outlet), 3 = radial outward."
         )?;
         writeln!(w, "*NODE")?;
-        for &n in &self.nodes {
-            let p = mesh.nodes[n as usize].coords * self.scale;
-            writeln!(w, "{}, {}, {}, {}", n as u64 + 1, fmt_coord(p.x), fmt_coord(p.y), fmt_coord(p.z))?;
-        }
+        let node_line = |t: &mut Text, label: u64, p: Point3<f64>| {
+            let p = p.coords * self.scale;
+            t.uint(label).str(", ");
+            coord(t, p.x).str(", ");
+            coord(t, p.y).str(", ");
+            coord(t, p.z).byte(b'\n');
+        };
+        write_items(w, self.nodes.len(), |t, i| {
+            let n = self.nodes[i];
+            node_line(t, n as u64 + 1, mesh.nodes[n as usize]);
+        })?;
         if let Some(m) = &self.mids {
-            for k in 0..m.len() as u32 {
-                let p = m.position(mesh, k).coords * self.scale;
-                writeln!(w, "{}, {}, {}, {}", m.label(mesh, k), fmt_coord(p.x), fmt_coord(p.y), fmt_coord(p.z))?;
-            }
+            write_items(w, m.len(), |t, k| node_line(t, m.label(mesh, k as u32), m.position(mesh, k as u32)))?;
         }
         for layer in &self.layers {
             writeln!(w, "*ELEMENT, TYPE={}, ELSET={}", self.element.name(), layer.name)?;
-            let mut entries: Vec<u64> = Vec::with_capacity(21);
-            for e in layer.range.clone() {
-                entries.clear();
-                entries.push(e as u64 + 1);
-                entries.extend(mesh.hexes[e].iter().map(|&n| n as u64 + 1));
-                if let Some(m) = &self.mids {
-                    entries.extend(m.of_element(e).iter().map(|&k| m.label(mesh, k)));
+            write_items(w, layer.range.len(), |t, i| {
+                let e = layer.range.start + i;
+                let mut entries = [0u64; 21];
+                entries[0] = e as u64 + 1;
+                for (k, &n) in mesh.hexes[e].iter().enumerate() {
+                    entries[1 + k] = n as u64 + 1;
                 }
-                write_data_lines(w, &entries)?;
-            }
+                let mut count = 9;
+                if let Some(m) = &self.mids {
+                    for (k, &mid) in m.of_element(e).iter().enumerate() {
+                        entries[9 + k] = m.label(mesh, mid);
+                    }
+                    count = 21;
+                }
+                data_record(t, &entries[..count]);
+            })?;
         }
         writeln!(w, "*ELSET, ELSET=WALL, GENERATE")?;
         writeln!(w, "{}, {}, 1", wall.start + 1, wall.end)?;
@@ -661,9 +683,10 @@ impl<'a> Deck<'a> {
         }
         for (name, faces) in &self.surfaces {
             writeln!(w, "*SURFACE, NAME={name}, TYPE=ELEMENT")?;
-            for f in faces {
-                writeln!(w, "{}, {}", f.element as u64 + 1, abaqus_face_label(f.face as usize))?;
-            }
+            write_items(w, faces.len(), |t, i| {
+                let f = faces[i];
+                t.uint(f.element as u64 + 1).str(", ").str(abaqus_face_label(f.face as usize)).byte(b'\n');
+            })?;
         }
         match self.hold {
             EndHold::Transform => {
@@ -723,10 +746,12 @@ impl<'a> Deck<'a> {
                 Dialect::Calculix => writeln!(w, "*DISTRIBUTION, NAME={dist}")?,
             }
             writeln!(w, ", 1., 0., 0., 0., 1., 0.")?;
-            for e in layer.range.clone() {
-                let t = &mesh.triads[e];
-                writeln!(w, "{}, {}", e + 1, two_vectors(&t.e_circ, &t.e_long))?;
-            }
+            write_items(w, layer.range.len(), |t, i| {
+                let e = layer.range.start + i;
+                let triad = &mesh.triads[e];
+                t.uint(e as u64 + 1).str(", ");
+                vector_pair(t, &triad.e_circ, &triad.e_long).byte(b'\n');
+            })?;
             match self.dialect {
                 Dialect::Abaqus => {
                     writeln!(
@@ -766,7 +791,6 @@ impl<'a> Deck<'a> {
                 writeln!(w, ",")?;
             }
         }
-        w.write_all(self.step.as_bytes())?;
         Ok(())
     }
 }
@@ -774,7 +798,20 @@ impl<'a> Deck<'a> {
 /// The six components of two vectors as data-line fields, `ax, ay, az, bx, by, bz`: the two
 /// points of a `*TRANSFORM` axis, the two directions of a `*DISTRIBUTION` line.
 fn two_vectors(a: &nalgebra::Vector3<f64>, b: &nalgebra::Vector3<f64>) -> String {
-    [a.x, a.y, a.z, b.x, b.y, b.z].map(fmt_coord).join(", ")
+    text_of(|t| {
+        vector_pair(t, a, b);
+    })
+}
+
+/// [`two_vectors`] appended to a text.
+fn vector_pair<'t>(t: &'t mut Text, a: &nalgebra::Vector3<f64>, b: &nalgebra::Vector3<f64>) -> &'t mut Text {
+    for (k, x) in [a.x, a.y, a.z, b.x, b.y, b.z].into_iter().enumerate() {
+        if k > 0 {
+            t.str(", ");
+        }
+        coord(t, x);
+    }
+    t
 }
 
 /// Position (mesh unit) of a deck node label: a mesh node or a mid-edge node.
@@ -786,41 +823,40 @@ fn label_position(mesh: &VesselMesh, mids: Option<&MidEdges>, label: u64) -> Poi
     }
 }
 
-/// Comma-separated entries, at most [`MAX_ENTRIES`] per line; a line that continues ends with a
-/// comma.
+/// One record of comma-separated entries, at most [`MAX_ENTRIES`] per line; a line that
+/// continues ends with a comma.
 fn write_data_lines(w: &mut dyn Write, entries: &[u64]) -> std::io::Result<()> {
-    let chunks: Vec<&[u64]> = entries.chunks(MAX_ENTRIES).collect();
-    let record_continues = |i: usize| i + 1 < chunks.len();
-    for (i, chunk) in chunks.iter().enumerate() {
-        let mut line = String::with_capacity(chunk.len() * 10);
-        for (k, v) in chunk.iter().enumerate() {
-            if k > 0 {
-                line.push_str(", ");
-            }
-            line.push_str(&v.to_string());
-        }
-        if record_continues(i) {
-            line.push(',');
-        }
-        writeln!(w, "{line}")?;
-    }
-    Ok(())
+    let lines = entries.len().div_ceil(MAX_ENTRIES);
+    write_items(w, lines, |t, i| data_line(t, entries, i, lines))
 }
 
-/// The deck as text in two parts: the model data (everything before the step) and the step
-/// (the rendered `step_inflation.inp`, written last), so another step can follow the same model.
-pub fn deck_parts(
-    mesh: &VesselMesh,
-    options: &WriteOptions,
-    dialect: Dialect,
-    hold: EndHold,
-) -> Result<(String, String)> {
-    let deck = Deck::new(mesh, options, dialect, hold)?;
-    let mut buf = Vec::new();
-    deck.write(&mut buf).map_err(|e| Error::Config(format!("internal: cannot render the deck: {e}")))?;
-    let text = String::from_utf8(buf).map_err(|e| Error::Config(format!("internal: deck is not UTF-8: {e}")))?;
-    let model_len = text.len() - deck.step.len();
-    Ok((text[..model_len].to_string(), deck.step.clone()))
+/// Line `i` of `lines` of a record ([`write_data_lines`]).
+fn data_line(t: &mut Text, entries: &[u64], i: usize, lines: usize) {
+    let chunk = &entries[i * MAX_ENTRIES..((i + 1) * MAX_ENTRIES).min(entries.len())];
+    t.uints(chunk.iter().copied(), ", ");
+    if i + 1 < lines {
+        t.byte(b',');
+    }
+    t.byte(b'\n');
+}
+
+/// A short record ([`write_data_lines`]) appended to a text.
+fn data_record(t: &mut Text, entries: &[u64]) {
+    let lines = entries.len().div_ceil(MAX_ENTRIES);
+    (0..lines).for_each(|i| data_line(t, entries, i, lines));
+}
+
+/// The model data of a deck (everything before its step), checked when built and written by
+/// [`ModelData::write`], so that another step can follow the same model.
+pub struct ModelData<'a>(Deck<'a>);
+
+impl<'a> ModelData<'a> {
+    pub fn new(mesh: &'a VesselMesh, options: &WriteOptions, dialect: Dialect, hold: EndHold) -> Result<Self> {
+        Deck::new(mesh, options, dialect, hold).map(ModelData)
+    }
+    pub fn write(&self, w: &mut dyn Write) -> std::io::Result<()> {
+        self.0.write_model(w)
+    }
 }
 
 /// Writes `<dialect>/model.inp` under `dir`.

@@ -15,6 +15,7 @@ pub mod inp;
 pub mod material;
 pub mod openfoam;
 pub mod template;
+pub mod text;
 pub mod vtu;
 
 /// What every writer may need besides the mesh.
@@ -145,21 +146,49 @@ pub fn write_text_file(dir: &Path, rel: &str, text: &str, executable: bool) -> R
     Ok(())
 }
 
-/// Writes a file through a temporary name in the same folder and renames it when complete,
-/// so an interrupted write never leaves a half-written file under the final name.
+/// Writes a file through a temporary file beside it (a fresh random name, created exclusively,
+/// so a link planted there is never followed) renamed over `path` when complete: an interrupted
+/// write never leaves a half-written file under the final name, and a signal removes the
+/// temporary file (see [`crate::output`]); a write after the signal fails.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<()> {
     use crate::error::Error;
-    let tmp = path.with_extension(format!("{}.partial", path.extension().and_then(|e| e.to_str()).unwrap_or("out")));
-    let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
-        let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
-        write(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, "cannot write", e)
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let mut prefix = std::ffi::OsString::from(".");
+    prefix.push(path.file_name().unwrap_or_default());
+    prefix.push(".");
+    let tmp = crate::output::create_partial(|| {
+        let mut builder = tempfile::Builder::new();
+        builder.prefix(&prefix).suffix(".partial");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            builder.permissions(std::fs::Permissions::from_mode(0o666)); // less the umask, as any file
+        }
+        builder.tempfile_in(parent)
     })
+    .map_err(|e| Error::io(path, "cannot write", e))?;
+    let tmp_path = tmp.path().to_path_buf();
+    let result = (|| {
+        let mut w = std::io::BufWriter::with_capacity(1 << 20, StopOnSignal(tmp.as_file()));
+        write(&mut w)?;
+        w.into_inner().map_err(|e| e.into_error())?.0.sync_all()?;
+        crate::output::check_interrupted()?;
+        tmp.persist(path).map(|_| ()).map_err(|e| e.error)
+    })();
+    crate::output::forget_partial(&tmp_path);
+    result.map_err(|e| Error::io(path, "cannot write", e))
+}
+
+/// A writer that fails once the run is interrupted, so a signal stops a long write within one
+/// buffer.
+struct StopOnSignal<W>(W);
+
+impl<W: std::io::Write> std::io::Write for StopOnSignal<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        crate::output::check_interrupted()?;
+        self.0.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.0.flush()
+    }
 }

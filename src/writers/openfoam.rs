@@ -29,7 +29,10 @@
 //! From `templates/openfoam/` (embedded), placeholders `{{name}}` substituted strictly (an
 //! unknown placeholder is an error): `system/{controlDict,fvSchemes,fvSolution}`, `0/U`, `0/p`,
 //! `constant/transportProperties` (Newtonian blood, nu = 3.5e-6 m2/s by default),
-//! `constant/turbulenceProperties` (laminar; v1912 reads this name), `Allrun`. The inlet
+//! `constant/turbulenceProperties` (laminar; v1912 reads this name), `system/decomposeParDict`
+//! (method `simple`, slabs across the lumen's longest extent: Debian's v1912 has no Scotch) and
+//! `Allrun` (`./Allrun N` runs on N MPI processes: decomposePar, the solver under mpirun,
+//! reconstructPar). The inlet
 //! velocity is written per inlet face ([`inlet_velocities`]): parabolic in the distance to the
 //! section boundary, or plug, scaled so that the inlet flux is exactly the flow rate asked.
 //! Every end of the mesh is its own patch with its own entry in `0/U` and `0/p` ([`EndNames`]):
@@ -41,6 +44,7 @@
 //! 'wall' which clashes with patch 2 of the same name" warning (the type puts every wall patch in
 //! the group `wall`); the name is kept because users and the issue expect it.
 
+use super::text::{write_binary, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::config::{FoamSolver, InletProfile, OpenFoamConfig};
 use crate::error::{Error, Result};
@@ -242,6 +246,89 @@ struct PatchSpec<'a> {
 /// Slot marks of `build`: a cell face that is on the boundary, not yet in a patch.
 const UNASSIGNED: u32 = u32::MAX;
 
+/// The cells of `hexes` around each node, ascending: node n's are `around[first[n]..first[n + 1]]`.
+fn cells_around_nodes(hexes: &[crate::mesh::Hex], n_nodes: usize) -> (Vec<u32>, Vec<u32>) {
+    let mut first = vec![0u32; n_nodes + 1];
+    for h in hexes {
+        for &n in h {
+            first[n as usize + 1] += 1;
+        }
+    }
+    for i in 1..first.len() {
+        first[i] += first[i - 1];
+    }
+    let mut fill = first.clone();
+    let mut around = vec![0u32; hexes.len() * 8];
+    for (c, h) in hexes.iter().enumerate() {
+        for &n in h {
+            around[fill[n as usize] as usize] = c as u32;
+            fill[n as usize] += 1;
+        }
+    }
+    (first, around)
+}
+
+/// [`face_partners`]: a cell face shared with no other cell.
+const NO_PARTNER: u32 = u32::MAX;
+
+/// For every face slot (cell * 6 + canonical face) of the elements `cells`, the slot of the other
+/// cell's face on the same four nodes, or [`NO_PARTNER`]. The candidates are the cells on both
+/// ends of a diagonal of the face (from a node-to-cell table, each node's cells ascending), so the
+/// pairing costs a few comparisons per face and the memory of the table. A face on more than two
+/// cells, or twice on one, is refused.
+fn face_partners(mesh: &VesselMesh, cells: Range<usize>) -> Result<Vec<u32>> {
+    let hexes = &mesh.hexes[cells.clone()];
+    let (first, around) = cells_around_nodes(hexes, mesh.nodes.len());
+    let key = |c: usize, f: usize| {
+        let mut k = face_nodes(&hexes[c], f);
+        k.sort_unstable();
+        k
+    };
+    /// Marks of a slot whose face is shared by more than two cells or twice by one cell.
+    const DEGENERATE: u32 = u32::MAX - 1;
+    let mut partner = vec![NO_PARTNER; hexes.len() * 6];
+    let cells_at = |n: u32| &around[first[n as usize] as usize..first[n as usize + 1] as usize];
+    partner.par_chunks_mut(6).enumerate().for_each(|(c, out)| {
+        let keys: [[u32; 4]; 6] = std::array::from_fn(|f| key(c, f));
+        for (f, slot) in out.iter_mut().enumerate() {
+            let k = keys[f];
+            if (0..6).any(|g| g != f && keys[g] == k) {
+                *slot = DEGENERATE;
+                continue;
+            }
+            // Cells on both ends of a diagonal of the face: the face's cells, in a conformal mesh.
+            let q = face_nodes(&hexes[c], f);
+            let (a, b) = (cells_at(q[0]), cells_at(q[2]));
+            let (mut i, mut j) = (0, 0);
+            while i < a.len() && j < b.len() {
+                if a[i] < b[j] {
+                    i += 1;
+                } else if a[i] > b[j] {
+                    j += 1;
+                } else {
+                    let d = a[i] as usize;
+                    if d != c {
+                        if let Some(g) = (0..6).find(|&g| key(d, g) == k) {
+                            *slot = if *slot == NO_PARTNER { (d * 6 + g) as u32 } else { DEGENERATE };
+                        }
+                    }
+                    i += 1;
+                    j += 1;
+                }
+            }
+        }
+    });
+    if let Some(a) = partner.iter().position(|&p| p == DEGENERATE) {
+        return Err(Error::Geometry(format!(
+            "OpenFOAM writer: face S{} of element {} is shared by more than two cells or twice by one cell \
+             (degenerate mesh)",
+            a % 6 + 1,
+            cells.start + a / 6 + 1
+        )));
+    }
+    Ok(partner)
+}
+
 /// Builds the polyMesh of the elements `cells` (contiguous) with the given patches.
 fn build(
     mesh: &VesselMesh,
@@ -267,53 +354,34 @@ fn build(
         face_nodes(&mesh.hexes[first + slot / 6], slot % 6).map(|n| node_point[n as usize])
     };
 
-    // Pair equal faces: sort (sorted points, slot); equal neighbours in the order are one internal face.
-    let mut keys: Vec<([u32; 4], u32)> = (0..n_cells * 6)
-        .into_par_iter()
-        .map(|slot| {
-            let mut k = cell_face(slot);
-            k.sort_unstable();
-            (k, slot as u32)
-        })
-        .collect();
-    keys.par_sort_unstable();
-    let mut internal: Vec<(u32, u32, u32, u32)> = Vec::with_capacity(n_cells * 3);
+    // Pair equal faces: each cell face finds its twin among the cells around its first node.
+    let partner = face_partners(mesh, cells.clone())?;
+    let upward = |a: usize| partner[a] != NO_PARTNER && partner[a] as usize / 6 > a / 6;
+    let n_internal = (0..partner.len()).filter(|&a| upward(a)).count();
+    let n_faces = n_internal + partner.iter().filter(|&&p| p == NO_PARTNER).count();
     let mut slot_face = vec![UNASSIGNED; n_cells * 6];
-    let mut i = 0;
-    while i < keys.len() {
-        let same = |j: usize| j < keys.len() && keys[j].0 == keys[i].0;
-        if same(i + 1) {
-            let (a, b) = (keys[i].1, keys[i + 1].1);
-            let (ca, cb) = (a / 6, b / 6);
-            if same(i + 2) || ca == cb {
-                let e = first + ca as usize;
-                return Err(Error::Geometry(format!(
-                    "OpenFOAM writer: face S{} of element {} is shared by more than two cells or twice by one cell \
-                     (degenerate mesh)",
-                    a % 6 + 1,
-                    e + 1
-                )));
-            }
-            internal.push((ca, cb, a, b));
-            i += 2;
-        } else {
-            i += 1;
+    let mut faces = Vec::with_capacity(n_faces);
+    let mut owner = Vec::with_capacity(n_faces);
+    let mut neighbour = Vec::with_capacity(n_internal);
+    // Internal faces in (owner, neighbour) order, the owner the lower cell, its slot first among equals.
+    for c in 0..n_cells {
+        let mut up = [(0u32, 0usize); 6];
+        let mut count = 0;
+        for a in (c * 6..c * 6 + 6).filter(|&a| upward(a)) {
+            up[count] = (partner[a] / 6, a);
+            count += 1;
+        }
+        up[..count].sort_unstable();
+        for &(n, a) in &up[..count] {
+            let k = faces.len() as u32;
+            faces.push(cell_face(a));
+            owner.push(c as u32);
+            neighbour.push(n);
+            slot_face[a] = k;
+            slot_face[partner[a] as usize] = k;
         }
     }
-    internal.par_sort_unstable();
-    let n_internal = internal.len();
-    let mut faces = Vec::with_capacity(n_internal + (n_cells * 6 - 2 * n_internal));
-    let mut owner = Vec::with_capacity(faces.capacity());
-    let mut neighbour = Vec::with_capacity(n_internal);
-    for (k, &(o, n, a, b)) in internal.iter().enumerate() {
-        faces.push(cell_face(a as usize));
-        owner.push(o);
-        neighbour.push(n);
-        slot_face[a as usize] = k as u32;
-        slot_face[b as usize] = k as u32;
-    }
-    drop(keys);
-    drop(internal);
+    drop(partner);
 
     let slot_of = |set: &str, ef: &ElementFace| -> Result<usize> {
         let e = ef.element as usize;
@@ -502,27 +570,35 @@ fn header(
     writeln!(w, "// * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * //\n")
 }
 
-/// A binary list: `N\n(` raw bytes `)`.
-fn binary_list(w: &mut dyn Write, n: usize, bytes: impl Iterator<Item = u8>) -> std::io::Result<()> {
+/// A binary list of `n` items: `N\n(` raw bytes `)`; `encode(i, bytes)` appends item `i`.
+fn binary_list(w: &mut dyn Write, n: usize, encode: impl Fn(usize, &mut Vec<u8>)) -> std::io::Result<()> {
     write!(w, "{n}\n(")?;
-    let buf: Vec<u8> = bytes.collect();
-    w.write_all(&buf)?;
+    write_binary(w, n, |range, bytes| range.for_each(|i| encode(i, bytes)))?;
     writeln!(w, ")")
 }
 
-fn label_bytes(v: &[u32]) -> impl Iterator<Item = u8> + '_ {
-    v.iter().flat_map(|&x| (x as i32).to_le_bytes())
+/// A 32-bit label, little-endian.
+fn label_bytes(x: u32, out: &mut Vec<u8>) {
+    out.extend_from_slice(&(x as i32).to_le_bytes());
+}
+
+/// An ASCII list: `N\n(`, one item per line, `)`.
+fn ascii_list(w: &mut dyn Write, n: usize, item: impl Fn(&mut Text, usize) + Sync) -> std::io::Result<()> {
+    writeln!(w, "{n}\n(")?;
+    write_items(w, n, |t, i| {
+        item(t, i);
+        t.byte(b'\n');
+    })?;
+    writeln!(w, ")")
 }
 
 fn write_labels(w: &mut dyn Write, binary: bool, v: &[u32]) -> std::io::Result<()> {
     if binary && !v.is_empty() {
-        binary_list(w, v.len(), label_bytes(v))
+        binary_list(w, v.len(), |i, out| label_bytes(v[i], out))
     } else {
-        writeln!(w, "{}\n(", v.len())?;
-        for x in v {
-            writeln!(w, "{x}")?;
-        }
-        writeln!(w, ")")
+        ascii_list(w, v.len(), |t, i| {
+            t.uint(v[i] as u64);
+        })
     }
 }
 
@@ -547,36 +623,30 @@ pub fn write_polymesh(poly: &PolyMesh, binary: bool, case: &Path) -> Result<Vec<
     };
     file("points", &|w| {
         header(w, binary, "vectorField", loc, "points", None)?;
+        let points = &poly.points;
         if binary {
-            binary_list(
-                w,
-                poly.points.len(),
-                poly.points.iter().flat_map(|p| [p.x, p.y, p.z]).flat_map(f64::to_le_bytes),
-            )?;
+            binary_list(w, points.len(), |i, out| {
+                [points[i].x, points[i].y, points[i].z].iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))
+            })
         } else {
-            writeln!(w, "{}\n(", poly.points.len())?;
-            for p in &poly.points {
-                writeln!(w, "({:e} {:e} {:e})", p.x, p.y, p.z)?;
-            }
-            writeln!(w, ")")?;
+            ascii_list(w, points.len(), |t, i| {
+                let p = points[i];
+                t.byte(b'(').exp(p.x).byte(b' ').exp(p.y).byte(b' ').exp(p.z).byte(b')');
+            })
         }
-        Ok(())
     })?;
     file("faces", &|w| {
+        let faces = &poly.faces;
         if binary {
             header(w, true, "faceCompactList", loc, "faces", None)?;
-            let offsets: Vec<u32> = (0..=poly.faces.len() as u32).map(|i| 4 * i).collect();
-            binary_list(w, offsets.len(), label_bytes(&offsets))?;
+            binary_list(w, faces.len() + 1, |i, out| label_bytes(4 * i as u32, out))?;
             writeln!(w)?;
-            let flat: Vec<u32> = poly.faces.iter().flatten().copied().collect();
-            binary_list(w, flat.len(), label_bytes(&flat))
+            binary_list(w, 4 * faces.len(), |i, out| label_bytes(faces[i / 4][i % 4], out))
         } else {
             header(w, false, "faceList", loc, "faces", None)?;
-            writeln!(w, "{}\n(", poly.faces.len())?;
-            for f in &poly.faces {
-                writeln!(w, "4({} {} {} {})", f[0], f[1], f[2], f[3])?;
-            }
-            writeln!(w, ")")
+            ascii_list(w, faces.len(), |t, i| {
+                t.str("4(").uints(faces[i].map(u64::from), " ").byte(b')');
+            })
         }
     })?;
     file("owner", &|w| {
@@ -607,15 +677,15 @@ pub fn write_polymesh(poly: &PolyMesh, binary: bool, case: &Path) -> Result<Vec<
             header(w, false, "regIOobject", loc, "faceZones", None)?;
             writeln!(w, "{}\n(", poly.face_zones.len())?;
             for z in &poly.face_zones {
-                writeln!(w, "{}\n{{\n    type faceZone;\n    faceLabels List<label> {}\n(", z.name, z.faces.len())?;
-                for f in &z.faces {
-                    writeln!(w, "{f}")?;
-                }
-                writeln!(w, ")\n;\n    flipMap List<bool> {}\n(", z.flip.len())?;
-                for f in &z.flip {
-                    writeln!(w, "{}", *f as u8)?;
-                }
-                writeln!(w, ")\n;\n}}")?;
+                write!(w, "{}\n{{\n    type faceZone;\n    faceLabels List<label> ", z.name)?;
+                ascii_list(w, z.faces.len(), |t, i| {
+                    t.uint(z.faces[i] as u64);
+                })?;
+                write!(w, ";\n    flipMap List<bool> ")?;
+                ascii_list(w, z.flip.len(), |t, i| {
+                    t.byte(b'0' + z.flip[i] as u8);
+                })?;
+                writeln!(w, ";\n}}")?;
             }
             writeln!(w, ")")
         })?;
@@ -632,11 +702,11 @@ fn write_cell_zones(
     header(w, false, "regIOobject", location, object, None)?;
     writeln!(w, "{}\n(", zones.len())?;
     for (name, cells) in zones {
-        writeln!(w, "{name}\n{{\n    type cellZone;\n    cellLabels List<label> {}\n(", cells.len())?;
-        for c in cells {
-            writeln!(w, "{c}")?;
-        }
-        writeln!(w, ")\n;\n}}")?;
+        write!(w, "{name}\n{{\n    type cellZone;\n    cellLabels List<label> ")?;
+        ascii_list(w, cells.len(), |t, i| {
+            t.uint(cells[i] as u64);
+        })?;
+        writeln!(w, ";\n}}")?;
     }
     writeln!(w, ")")
 }
@@ -648,6 +718,7 @@ const TEMPLATES: &[(&str, &str)] = &[
     ("system/controlDict", include_str!("../../templates/openfoam/system/controlDict")),
     ("system/fvSchemes", include_str!("../../templates/openfoam/system/fvSchemes")),
     ("system/fvSolution", include_str!("../../templates/openfoam/system/fvSolution")),
+    ("system/decomposeParDict", include_str!("../../templates/openfoam/system/decomposeParDict")),
     ("0/U", include_str!("../../templates/openfoam/0/U")),
     ("0/p", include_str!("../../templates/openfoam/0/p")),
     ("constant/transportProperties", include_str!("../../templates/openfoam/constant/transportProperties")),
@@ -763,6 +834,21 @@ fn min_centre_distance(poly: &PolyMesh) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The axis of the lumen's longest extent (`x`, `y` or `z`) and the `n` of decomposePar's
+/// `simple` method that cuts it into a given number of slabs: `(1 1 N)` along z, ...
+pub fn slab_axis(poly: &PolyMesh) -> (&'static str, impl Fn(&str) -> String) {
+    let extent = |k: usize| {
+        let (lo, hi) = poly.points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| (lo.min(p[k]), hi.max(p[k])));
+        hi - lo
+    };
+    let axis = (0..3).max_by(|a, b| extent(*a).total_cmp(&extent(*b))).unwrap_or(2);
+    let slabs = move |count: &str| {
+        let n: Vec<&str> = (0..3).map(|k| if k == axis { count } else { "1" }).collect();
+        format!("({})", n.join(" "))
+    };
+    (["x", "y", "z"][axis], slabs)
+}
+
 /// Placeholder values of the case templates.
 fn case_vars(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Result<Vec<(&'static str, String)>> {
     let inlet = poly
@@ -801,8 +887,12 @@ fn case_vars(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Resul
             )
         }
     };
+    let (axis, slabs) = slab_axis(poly);
     let mut vars = end_vars(ends)?;
     vars.extend([
+        ("slab_axis", axis.to_string()),
+        ("slabs_2", slabs("2")),
+        ("slabs_np", slabs("$np")),
         ("version", env!("CARGO_PKG_VERSION").to_string()),
         ("application", application.into()),
         ("ddt_scheme", ddt.into()),
@@ -858,11 +948,11 @@ pub fn write_case(poly: &PolyMesh, ends: &EndNames, options: &WriteOptions, case
 /// Writes lumen + wall in one polyMesh into `dir/openfoam-fsi/`, with the system files that
 /// OpenFOAM utilities need, `constant/polyMesh/fluidSolidZones` and an `Allrun` that splits the regions.
 pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
+    // The lumen's polyMesh gives the system files' values; it is gone before the whole one is built.
+    let vars = case_vars(&lumen_polymesh(mesh)?, &EndNames::of(mesh)?, &options.openfoam)?;
     let poly = fsi_polymesh(mesh)?;
     let case = dir.join("openfoam-fsi");
     let mut out = write_polymesh(&poly, options.openfoam.binary, &case)?;
-    let lumen = lumen_polymesh(mesh)?;
-    let vars = case_vars(&lumen, &EndNames::of(mesh)?, &options.openfoam)?;
     for (rel, text) in TEMPLATES.iter().filter(|(rel, _)| rel.starts_with("system/")) {
         out.push(write_text(&case, rel, &render(rel, text, &vars)?, false)?);
     }

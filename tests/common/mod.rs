@@ -247,3 +247,186 @@ pub fn real_unbranched_meshes(vessels: &Path, config: &MeshConfig) -> Vec<(&'sta
     let aorta = vesselhex::pipeline::mesh_vessel(&aorta, &cl, config, &mut Progress::new(true, 9)).unwrap().mesh;
     vec![("aneurisk_C0092_ica_segment", c0092), ("vmtk_abdominal_aorta_segment", aorta)]
 }
+
+// ------------------------------------------------------------------------------------------------
+// Solver runs and what they show, shared by tests/calculix.rs and tests/febio_run.rs
+// ------------------------------------------------------------------------------------------------
+
+use std::collections::{HashMap, HashSet};
+use vesselhex::mesh::sets;
+use vesselhex::writers::WriteOptions;
+
+/// Nodal displacements by deck label (vesselhex node index + 1, as every deck numbers nodes).
+pub type Displacements = HashMap<u64, [f64; 3]>;
+
+/// Whether `ccx` is installed: without it, "skipped" outside CI and a failure under CI.
+pub fn ccx_available() -> bool {
+    let found = Command::new("ccx").arg("-v").output().is_ok();
+    if !found {
+        assert!(!under_ci(), "ccx is not installed but CI=true: install calculix-ccx");
+        eprintln!("skipped: ccx is not installed");
+    }
+    found
+}
+
+/// What one ccx run left behind; its scratch directory goes when the run is dropped, unless a
+/// check failed.
+pub struct CcxRun {
+    pub dir: PathBuf,
+    pub log: String,
+}
+
+impl Drop for CcxRun {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            eprintln!("kept for a look: {}", self.dir.display());
+        } else if let Some(scratch) = self.dir.parent() {
+            let _ = std::fs::remove_dir_all(scratch);
+        }
+    }
+}
+
+/// Writes the CalculiX deck of `mesh` and runs ccx on it; requires `Job finished`, exit 0, no
+/// warning, and both steps (toe, then on to the full pressure) run to their end.
+pub fn solve_calculix(mesh: &VesselMesh, options: &WriteOptions, name: &str) -> CcxRun {
+    let dir = temp_dir(&format!("ccx-{name}"));
+    let files = vesselhex::writers::calculix::write_calculix(mesh, options, &dir).unwrap();
+    assert_eq!(files, vec![PathBuf::from("calculix/model.inp")]);
+    let job = dir.join("calculix");
+    let started = std::time::Instant::now();
+    let out = Command::new("ccx").args(["-i", "model"]).current_dir(&job).env("OMP_NUM_THREADS", "1").output().unwrap();
+    let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let sta = std::fs::read_to_string(job.join("model.sta")).unwrap_or_default();
+    eprintln!(
+        "{name}: ccx exit {:?} in {:.1} s; {} wall elements\n{}\n{}",
+        out.status.code(),
+        started.elapsed().as_secs_f64(),
+        mesh.wall_range().len(),
+        log.lines()
+            .filter(|l| l.contains("Job finished") || l.contains("Total CalculiX Time") || l.contains("increment"))
+            .collect::<Vec<_>>()
+            .join("\n"),
+        sta
+    );
+    assert!(out.status.success(), "{name}: ccx failed:\n{log}");
+    assert!(log.contains("Job finished"), "{name}: no 'Job finished':\n{log}");
+    let warnings: Vec<&str> = log.lines().filter(|l| l.contains("*WARNING") || l.contains("*ERROR")).collect();
+    assert!(warnings.is_empty(), "{name}: ccx warned:\n{}", warnings.join("\n"));
+    // The last converged increment is step 2's, at step time 1.
+    let last: Vec<f64> = sta
+        .lines()
+        .filter_map(|l| l.split_whitespace().map(|f| f.parse::<f64>()).collect::<Result<Vec<f64>, _>>().ok())
+        .rfind(|f| f.len() == 7)
+        .unwrap_or_else(|| panic!("{name}: no converged increment in the .sta:\n{sta}"));
+    assert!(
+        last[0] == 2.0 && (last[5] - 1.0).abs() < 1e-9,
+        "{name}: the step did not end at the full pressure:\n{sta}"
+    );
+    CcxRun { dir: job, log }
+}
+
+/// Displacements of the last increment in ccx's ASCII .frd.
+pub fn frd_displacements(dir: &Path) -> Displacements {
+    let text = std::fs::read_to_string(dir.join("model.frd")).unwrap();
+    let mut last = HashMap::new();
+    let mut current: Option<Displacements> = None;
+    for line in text.lines() {
+        if line.starts_with(" -4") {
+            current = line.contains("DISP").then(HashMap::new);
+        } else if line.starts_with(" -3") {
+            if let Some(c) = current.take() {
+                last = c;
+            }
+        } else if let (Some(c), true) = (current.as_mut(), line.starts_with(" -1")) {
+            let node: u64 = line[3..13].trim().parse().unwrap();
+            let v: Vec<f64> = (0..3).map(|k| line[13 + 12 * k..25 + 12 * k].trim().parse().unwrap()).collect();
+            c.insert(node, [v[0], v[1], v[2]]);
+        }
+    }
+    assert!(!last.is_empty(), "no DISP block in the .frd");
+    last
+}
+
+/// A straight tube along z from z = 0 to 30 mm: the mean radial displacement and mean radius of
+/// the interface nodes away from the ends (5 < z < 25), and the least radial displacement of any.
+pub fn inner_radial(mesh: &VesselMesh, disp: &Displacements) -> (f64, f64, f64) {
+    let interface = &mesh.node_sets[sets::INTERFACE_NODES];
+    let (mut sum_u, mut sum_r, mut min_u, mut n) = (0.0, 0.0, f64::INFINITY, 0.0);
+    for &i in interface {
+        let p = mesh.nodes[i as usize];
+        let r = p.x.hypot(p.y);
+        let u = disp[&(i as u64 + 1)];
+        let ur = (u[0] * p.x + u[1] * p.y) / r;
+        min_u = min_u.min(ur);
+        if p.z > 5.0 && p.z < 25.0 {
+            sum_u += ur;
+            sum_r += r;
+            n += 1.0;
+        }
+    }
+    (sum_u / n, sum_r / n, min_u)
+}
+
+/// Every lumen-surface node off the end rings with its displacement along the lumen surface's
+/// outward normal there (from the lumen elements' outer faces), in node order.
+pub fn lumen_normal_motion(mesh: &VesselMesh, disp: &Displacements) -> Vec<(u32, f64)> {
+    let mut normal: HashMap<u32, Vector3<f64>> = Default::default();
+    for f in &mesh.face_sets[sets::LUMEN_WALL_FACES] {
+        let q = vesselhex::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
+        let a = vesselhex::mesh::quad_area_vector(q.map(|n| mesh.nodes[n as usize]));
+        for n in q {
+            *normal.entry(n).or_insert_with(Vector3::zeros) += a;
+        }
+    }
+    let ends: HashSet<u32> =
+        mesh.ends.iter().flat_map(|e| mesh.node_sets[&sets::wall_end(&e.name)].iter().copied()).collect();
+    mesh.node_sets[sets::INTERFACE_NODES]
+        .iter()
+        .filter(|i| !ends.contains(i))
+        .map(|&i| (i, Vector3::from(disp[&(i as u64 + 1)]).dot(&normal[&i].normalize())))
+        .collect()
+}
+
+/// A branched vessel opens without ballooning: in every branch the lumen surface's mean motion
+/// along its outward normal is positive, and every lumen-surface face stretches in area by more
+/// than 0.9 and less than 1.5 (the default wall stretches a straight tube's by 1.06).
+pub fn assert_lumen_opens(case: &str, mesh: &VesselMesh, disp: &Displacements) {
+    let motion = lumen_normal_motion(mesh, disp);
+    // The branch of each lumen-surface node: that of an intima element on it.
+    let mut branch_of_node = HashMap::new();
+    for e in mesh.region_range(vesselhex::mesh::Region::Intima) {
+        for n in mesh.hexes[e] {
+            branch_of_node.entry(n).or_insert(mesh.branch_of[e] as usize);
+        }
+    }
+    let mut per_branch = vec![(0.0, 0usize); mesh.branch_names.len()];
+    for &(i, un) in &motion {
+        let b = &mut per_branch[branch_of_node[&i]];
+        b.0 += un;
+        b.1 += 1;
+    }
+    let inward = motion.iter().filter(|m| m.1 <= 0.0).count();
+    // Area stretch of every lumen-surface face (the intima's inner faces).
+    let moved = |n: u32| mesh.nodes[n as usize] + Vector3::from(disp[&(n as u64 + 1)]);
+    let mut stretch: Vec<f64> = mesh.face_sets[sets::WALL_LUMEN_FACES]
+        .iter()
+        .map(|f| {
+            let q = vesselhex::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
+            let before = vesselhex::mesh::quad_area_vector(q.map(|n| mesh.nodes[n as usize])).norm();
+            vesselhex::mesh::quad_area_vector(q.map(moved)).norm() / before
+        })
+        .collect();
+    stretch.sort_by(f64::total_cmp);
+    let (least, median, most) = (stretch[0], stretch[stretch.len() / 2], stretch[stretch.len() - 1]);
+    eprintln!(
+        "{case}: {} lumen nodes, {inward} move inwards; mean u.n per branch {:?} mm; lumen face area \
+         stretch {least:.3} / {median:.3} / {most:.3} (least / median / most)",
+        motion.len(),
+        per_branch.iter().map(|b| format!("{:.3e}", b.0 / b.1 as f64)).collect::<Vec<_>>(),
+    );
+    for (b, (sum, count)) in per_branch.iter().enumerate() {
+        assert!(*count > 0 && *sum > 0.0, "{case}: branch {} does not open", mesh.branch_names[b]);
+    }
+    assert!(median > 1.0, "{case}: the lumen surface does not stretch");
+    assert!(least > 0.9 && most < 1.5, "{case}: lumen face area stretch from {least:.3} to {most:.3}");
+}
