@@ -189,8 +189,8 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
             let c = e.centre * units.from_mm();
             let role = if k == extraction.inlet { "inlet" } else { "outlet" };
             eprintln!(
-                "vesselhex: end {k} ({role}, {:?}): centre ({:.4}, {:.4}, {:.4}) {units}, radius {:.4} {units}",
-                e.kind,
+                "vesselhex: end {k} ({role}, {}): centre ({:.4}, {:.4}, {:.4}) {units}, radius {:.4} {units}",
+                e.kind.name(),
                 c.x,
                 c.y,
                 c.z,
@@ -238,7 +238,15 @@ fn check_output_file(flag: &str, path: &Path, others: &[(&str, &Path)]) -> vesse
     Ok(())
 }
 
-fn mesh(args: MeshArgs) -> vesselhex::Result<()> {
+/// What a mesh run ended with, short of an error.
+enum MeshOutcome {
+    /// Every vessel end meshed.
+    Complete,
+    /// The mesh was written, but some ends are not meshed (named in the warnings).
+    EndsNotMeshed,
+}
+
+fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
     let mut config = match &args.config {
         Some(path) => MeshConfig::from_case_file(path, args.preset)?,
         None => MeshConfig::preset(args.preset.unwrap_or_default()),
@@ -292,10 +300,16 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<()> {
     for w in &report.warnings {
         eprintln!("vesselhex: warning: {}", w.message);
     }
+    let meshed_ends = report.ends.iter().filter(|e| e.meshed).count();
+    let ends = if meshed_ends < report.ends.len() {
+        format!("{meshed_ends} of {} ends meshed; ", report.ends.len())
+    } else {
+        String::new()
+    };
     if !args.quiet {
         eprintln!(
-            "vesselhex: {} lumen + {} wall hexes; scaled Jacobian min {:.3} (wall mean {:.3}); lumen skew mean {:.3}; \
-             surface nodes within {:.2e} um; written to {}",
+            "vesselhex: {ends}{} lumen + {} wall hexes; scaled Jacobian min {:.3} (wall mean {:.3}); lumen skew mean \
+             {:.3}; surface nodes within {:.2e} um; written to {}",
             report.lumen.elements,
             report.wall.all.elements,
             report.lumen.scaled_jacobian.min.min(report.wall.all.scaled_jacobian.min),
@@ -305,12 +319,14 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<()> {
             args.output.display()
         );
     }
-    Ok(())
+    Ok(if ends.is_empty() { MeshOutcome::Complete } else { MeshOutcome::EndsNotMeshed })
 }
 
-/// Exit codes (see README): 0 success, 1 error, 2 usage error (clap's), 128 + the signal
-/// number when interrupted (130 SIGINT, 143 SIGTERM, 129 SIGHUP).
+/// Exit codes (see README): 0 success, 1 error, 2 usage error (clap's), 3 written but some
+/// vessel ends not meshed (report.json `ends`), 128 + the signal number when interrupted (130
+/// SIGINT, 143 SIGTERM, 129 SIGHUP).
 const EXIT_ERROR: u8 = 1;
+const EXIT_ENDS_NOT_MESHED: u8 = 3;
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -323,17 +339,18 @@ fn main() -> ExitCode {
     }
     let result = match cli.command {
         Command::Mesh(args) => mesh(args),
-        Command::Centerlines(args) => centerlines(args),
+        Command::Centerlines(args) => centerlines(args).map(|_| MeshOutcome::Complete),
         Command::Fixtures { output } => vesselhex::synthetic::write_all_fixtures(&output)
             .and_then(|_| vesselhex::synthetic_branching::write_all_branching_fixtures(&output))
-            .map(|_| ()),
+            .map(|_| MeshOutcome::Complete),
     };
     if let Some(signal) = vesselhex::output::interrupted_by() {
         eprintln!("vesselhex: {}", vesselhex::output::interruption(signal));
         return ExitCode::from(vesselhex::output::exit_code_of(signal));
     }
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(MeshOutcome::Complete) => ExitCode::SUCCESS,
+        Ok(MeshOutcome::EndsNotMeshed) => ExitCode::from(EXIT_ENDS_NOT_MESHED),
         Err(e) => {
             eprintln!("vesselhex: error: {}", one_line(&e.to_string()));
             ExitCode::from(EXIT_ERROR)

@@ -4,7 +4,9 @@
 use crate::accuracy::{surface_accuracy, SurfaceAccuracy};
 use crate::annotate::annotate;
 use crate::blocks::{graded_levels, growth_ratio_for_first_cell, SectionTemplate};
-use crate::centerline::Branch;
+use crate::centerline::{Branch, CenterlineSample};
+use crate::centerline_extract::{EndKind, VesselEnd};
+use crate::units::LengthUnit;
 use crate::centerline::{CenterlineTree, ForcedMerge};
 use crate::config::{MeshConfig, WallGrowth};
 use crate::error::{Error, Result};
@@ -21,7 +23,7 @@ use crate::progress::Progress;
 use crate::projection::{clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
 use crate::quality::Stats;
 use crate::report::{
-    bar_warnings, lumen_report, wall_report, BranchReport, InputReport, JunctionReport, Report, Warning,
+    bar_warnings, lumen_report, wall_report, BranchReport, EndReport, InputReport, JunctionReport, Report, Warning,
 };
 use crate::resources::short;
 use crate::surface::LumenSurface;
@@ -806,11 +808,13 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let (surface, hygiene) = clean_surface(read_surface_within(&request.surface, config.units, &limits)?.0)?;
     warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
     let centerline_units = request.centerline_units.unwrap_or(config.units);
+    let mut found_ends = None;
     let (centerlines, centerline_path) = match &request.centerlines {
         Some(path) => (read_centerlines_within(path, centerline_units, &limits)?, path.clone()),
         None => {
             let extraction = crate::centerline_extract::extract_centerlines(&surface, &request.extraction)?;
             warnings.extend(extraction.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
+            found_ends = Some((extraction.ends.clone(), extraction.inlet));
             (extraction.centerlines, PathBuf::from("(computed from the surface)"))
         }
     };
@@ -830,7 +834,11 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
         outputs.extend(write(&meshed.mesh, &options, output.staging())?);
     }
     progress.finish();
+    let (ends, inlet) = found_ends.unwrap_or_else(|| centerline_ends(&centerlines));
+    let ends = end_reports(&ends, inlet, &meshed.tree, config.output_units.from_mm());
+    warnings.extend(ends_not_meshed(&ends, config.output_units));
     let mut report = build_report(&meshed, &surface, &centerline_path, config, &progress.timings, warnings);
+    report.ends = ends;
     report.input.hygiene = hygiene;
     if request.reproducible {
         report.timings_s.values_mut().for_each(|t| *t = 0.0);
@@ -917,6 +925,75 @@ fn end_kind(end: &crate::projection::BranchEnd) -> &'static str {
     }
 }
 
+/// The ends of centerlines given: the first polyline's start (the inlet) and every polyline's
+/// last point, each once.
+fn centerline_ends(centerlines: &Centerlines) -> (Vec<VesselEnd>, usize) {
+    let mut ends: Vec<VesselEnd> = vec![];
+    let mut add = |p: &Point3<f64>, r: Option<f64>| {
+        if !ends.iter().any(|e| (e.centre - p).norm() < 1e-9) {
+            ends.push(VesselEnd { centre: *p, radius: r.unwrap_or(0.0), kind: EndKind::Centerline });
+        }
+    };
+    for (k, line) in centerlines.polylines.iter().enumerate() {
+        let radius = |i: usize| line.radii.as_ref().map(|r| r[i]);
+        if k == 0 {
+            add(&line.points[0], radius(0));
+        }
+        add(&line.points[line.points.len() - 1], radius(line.points.len() - 1));
+    }
+    (ends, 0)
+}
+
+/// A meshed branch ends within this many of the end's radii of its centre (a dome's mesh stops
+/// short of its tip, inside it) ...
+const MESHED_END_REACH: f64 = 2.0;
+/// ... or this many of the branch's own radii there (an end given as a bare point).
+const MESHED_END_BRANCH_RADII: f64 = 1.0;
+
+/// Every end with whether a branch of the mesh ends at it (see [`MESHED_END_REACH`]), in the
+/// output unit (`scale` per mm).
+fn end_reports(ends: &[VesselEnd], inlet: usize, tree: &CenterlineTree, scale: f64) -> Vec<EndReport> {
+    let terminals: Vec<&CenterlineSample> = tree
+        .branches
+        .iter()
+        .flat_map(|b| {
+            let first = b.start_junction.is_none().then(|| b.samples.first()).flatten();
+            let last = b.daughters.is_empty().then(|| b.samples.last()).flatten();
+            first.into_iter().chain(last)
+        })
+        .collect();
+    ends.iter()
+        .enumerate()
+        .map(|(k, e)| EndReport {
+            position: (e.centre.coords * scale).into(),
+            radius: e.radius * scale,
+            kind: e.kind.name(),
+            inlet: k == inlet,
+            meshed: terminals.iter().any(|t| {
+                (t.point - e.centre).norm() <= (MESHED_END_REACH * e.radius).max(MESHED_END_BRANCH_RADII * t.radius)
+            }),
+        })
+        .collect()
+}
+
+/// One warning per end no meshed branch reaches.
+fn ends_not_meshed(ends: &[EndReport], unit: LengthUnit) -> Vec<Warning> {
+    ends.iter()
+        .filter(|e| !e.meshed)
+        .map(|e| {
+            let [x, y, z] = e.position;
+            Warning::new(
+                "end_not_meshed",
+                format!(
+                    "the {} end at ({x:.3}, {y:.3}, {z:.3}) {unit} (radius {:.3} {unit}) is not meshed: no branch of the \
+                     mesh reaches it; give centerlines that reach it (--centerlines) or a point near it (--ends)",
+                    e.kind, e.radius
+                ),
+            )
+        })
+        .collect()
+}
+
 fn build_report(
     meshed: &Meshed,
     surface: &TriangleSurface,
@@ -997,6 +1074,7 @@ fn build_report(
         lumen: lumen_report(mesh),
         wall: wall_report(mesh),
         surface_accuracy: meshed.accuracy.clone(),
+        ends: vec![],
         branches,
         junctions,
         within_bars,
@@ -1009,7 +1087,36 @@ fn build_report(
 
 #[cfg(test)]
 mod tests {
-    use super::FinishQuality;
+    use super::{end_reports, ends_not_meshed, FinishQuality};
+    use crate::centerline::CenterlineTree;
+    use crate::centerline_extract::{EndKind, VesselEnd};
+    use crate::config::MeshConfig;
+    use crate::input::{CenterlinePolyline, Centerlines};
+    use crate::units::LengthUnit;
+    use nalgebra::Point3;
+
+    #[test]
+    fn an_end_no_branch_reaches_is_reported_and_named() {
+        // A straight vessel along z from 0 to 30 (radius 2) meshed; a third end off to the side.
+        let points: Vec<Point3<f64>> = (0..=60).map(|i| Point3::new(0.0, 0.0, 0.5 * i as f64)).collect();
+        let line = CenterlinePolyline {
+            radii: Some(vec![2.0; points.len()]),
+            points,
+            normals: None,
+            cell_tags: Default::default(),
+        };
+        let centerlines = Centerlines { polylines: vec![line], source: "straight".into() };
+        let tree = CenterlineTree::build(&centerlines, &MeshConfig::default().centerline, None).unwrap();
+        let end = |x: f64, z: f64, kind| VesselEnd { centre: Point3::new(x, 0.0, z), radius: 2.0, kind };
+        let ends = [end(0.0, 0.0, EndKind::Open), end(0.0, 31.0, EndKind::Dome), end(20.0, 15.0, EndKind::Open)];
+        let reports = end_reports(&ends, 0, &tree, 1.0);
+        let meshed: Vec<bool> = reports.iter().map(|e| e.meshed).collect();
+        assert_eq!(meshed, [true, true, false]);
+        assert!(reports[0].inlet && !reports[1].inlet && reports[1].kind == "dome");
+        let warnings = ends_not_meshed(&reports, LengthUnit::Mm);
+        assert_eq!(warnings.len(), 1);
+        assert!(warnings[0].kind == "end_not_meshed" && warnings[0].message.contains("(20.000, 0.000, 15.000) mm"));
+    }
 
     fn finish(worst: f64, worst_wall: f64, wall_mean: f64) -> FinishQuality {
         FinishQuality { worst, worst_wall, wall_mean }

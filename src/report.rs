@@ -75,6 +75,22 @@ pub struct JunctionReport {
     pub lumen_equiangle_skew: Stats,
 }
 
+/// One vessel end: found on the surface (or given), and whether the mesh reaches it.
+#[derive(Debug, Clone, Serialize)]
+pub struct EndReport {
+    /// Centre of the end (output unit): a loop's or cap's centre, a dome's inscribed ball, a
+    /// given point's ball, or a given centerline's end point.
+    pub position: [f64; 3],
+    /// Radius of the end section (output unit).
+    pub radius: f64,
+    /// `open` (a boundary loop), `flat cap`, `tagged cap`, `dome` (a rounded or blunt closed
+    /// end), `given` (`--ends`) or `centerline` (an end of the centerlines given).
+    pub kind: &'static str,
+    pub inlet: bool,
+    /// Whether a meshed branch ends there.
+    pub meshed: bool,
+}
+
 #[derive(Debug, Clone, Serialize)]
 pub struct InputReport {
     pub surface: String,
@@ -98,6 +114,8 @@ pub struct Report {
     pub lumen: RegionReport,
     pub wall: WallReport,
     pub surface_accuracy: SurfaceAccuracy,
+    /// Every vessel end, meshed or not (a vessel is never dropped in silence).
+    pub ends: Vec<EndReport>,
     pub branches: Vec<BranchReport>,
     pub junctions: Vec<JunctionReport>,
     /// Whether the mesh meets every quality bar ([`Bars`]); when not, `warnings` names the bar

@@ -17,6 +17,22 @@ pub enum EndKind {
     /// A rounded or blunt closed end, found as the far tip of a vessel the other ends' paths
     /// do not reach (see `rounded`).
     Dome,
+    /// An end of centerlines given with the surface (nothing was looked for).
+    Centerline,
+}
+
+impl EndKind {
+    /// The kind's name in messages and report.json.
+    pub fn name(&self) -> &'static str {
+        match self {
+            EndKind::Open => "open",
+            EndKind::Cap { tag: Some(_) } => "tagged cap",
+            EndKind::Cap { tag: None } => "flat cap",
+            EndKind::Given => "given",
+            EndKind::Dome => "dome",
+            EndKind::Centerline => "centerline",
+        }
+    }
 }
 
 /// One end of the vessel, in millimetres.
