@@ -204,17 +204,24 @@ fn bad_inputs_fail_clearly_and_leave_nothing() {
 }
 
 /// Copies a binary STL, dropping the triangles whose centroid lies within 1 mm of z = `z`.
+/// Writes `src` less its triangles within 1 mm of height `z` on the +x side: a hole in one
+/// side of the wall (a band all around would cut the vessel in two pieces, refused as such).
 fn write_stl_without_triangles_near(src: &str, dst: &Path, z: f64) {
     let b = std::fs::read(src).unwrap();
     let n = u32::from_le_bytes(b[80..84].try_into().unwrap()) as usize;
     let mut kept = vec![];
     for t in 0..n {
         let rec = &b[84 + 50 * t..84 + 50 * (t + 1)];
-        let zc: f64 = (0..3)
-            .map(|v| f32::from_le_bytes(rec[12 + 12 * v + 8..12 + 12 * v + 12].try_into().unwrap()) as f64)
-            .sum::<f64>()
-            / 3.0;
-        if (zc - z).abs() > 1.0 {
+        let mean = |axis: usize| {
+            (0..3)
+                .map(|v| {
+                    let at = 12 + 12 * v + 4 * axis;
+                    f32::from_le_bytes(rec[at..at + 4].try_into().unwrap()) as f64
+                })
+                .sum::<f64>()
+                / 3.0
+        };
+        if (mean(2) - z).abs() > 1.0 || mean(0) < 0.0 {
             kept.extend_from_slice(rec);
         }
     }
