@@ -157,12 +157,15 @@ fn every_real_surface_gives_every_end_and_paths_inside_the_lumen() {
                 .collect();
             (median, p95) = (percentile(&mut d, 0.5), percentile(&mut d, 0.95));
         }
+        let figure = |x: f64| if x.is_nan() { "-".to_string() } else { format!("{x:.3}") };
         println!(
-            "{:<34} {:>5} / {:<3} {:>8} {median:>8.3} {p95:>8.3} {seconds:>7.2}",
+            "{:<34} {:>5} / {:<3} {:>8} {:>8} {:>8} {seconds:>7.2}",
             case.name,
             ex.ends.len(),
             case.ends,
-            format!("{in_lumen}/{interior}")
+            format!("{in_lumen}/{interior}"),
+            figure(median),
+            figure(p95)
         );
         if ex.ends.len() < case.ends || ex.ends.len() > case.ends + 2 {
             failures.push(format!("{}: {} ends found, {} true", case.name, ex.ends.len(), case.ends));
