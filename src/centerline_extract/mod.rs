@@ -202,8 +202,11 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
         // An end found nearby (a dome's ball lies a radius or two inside its tip) is this one.
         let near = |e: &VesselEnd| (e.centre - cap.end.centre).norm() < BLUNT_SAME_END * e.radius.max(cap.end.radius);
         if beyond && !found.iter().any(near) {
-            end_nodes.push(graph.add_end(Ball { centre: cap.end.centre, radius: cap.end.radius }));
-            found.push(cap.end);
+            // Like a dome's, the end is the inscribed ball under the face: the face stays in
+            // the surface, so a path to the face itself would narrow to nothing there.
+            let ball = graph.pole(&cap.end.centre, 0.5 * cap.end.radius);
+            end_nodes.push(graph.add_end(ball));
+            found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: cap.end.kind });
         }
     }
     if found.len() < 2 {
