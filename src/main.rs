@@ -335,15 +335,10 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("vesselhex: error: {}", one_line(&e.to_string()));
+            eprintln!("vesselhex: error: {}", vesselhex::error::one_line(&e.to_string()));
             ExitCode::from(EXIT_ERROR)
         }
     }
-}
-
-/// Text on one line (messages from dependencies may span several).
-fn one_line(text: &str) -> String {
-    text.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" ")
 }
 
 /// Prints clap's error on one line, `vesselhex: error: ...`, keeping its tip and usage; help and
