@@ -85,24 +85,6 @@ def _triangles(offsets: np.ndarray, connectivity: np.ndarray) -> np.ndarray:
     return np.asarray(fans, dtype=np.int64).reshape(-1, 3)
 
 
-def _padded(cells: Any) -> Tuple[np.ndarray, np.ndarray]:
-    """Offsets and connectivity of a padded VTK cell array ``[n, i0, ..., n, ...]`` (PyVista's
-    ``faces`` and ``lines``)."""
-    cells = np.asarray(cells, dtype=np.int64)
-    if len(cells) % 4 == 0 and np.all(cells[::4] == 3):  # all triangles
-        n = len(cells) // 4
-        return np.arange(n + 1, dtype=np.int64) * 3, cells.reshape(-1, 4)[:, 1:].reshape(-1)
-    starts, i = [], 0
-    while i < len(cells):
-        starts.append(i)
-        i += int(cells[i]) + 1
-    sizes = cells[starts]
-    offsets = np.concatenate([[0], np.cumsum(sizes)])
-    keep = np.ones(len(cells), dtype=bool)
-    keep[starts] = False
-    return offsets, cells[keep]
-
-
 def _vtk_cells(cell_array: Any) -> Tuple[np.ndarray, np.ndarray]:
     """Offsets and connectivity of a ``vtkCellArray``."""
     from vtkmodules.util.numpy_support import vtk_to_numpy
@@ -116,7 +98,7 @@ def _surface_arrays(surface: SurfaceLike) -> Tuple[np.ndarray, np.ndarray]:
     """(points, triangles) of a surface given as arrays or as a polydata object."""
     if isinstance(surface, (tuple, list)) and len(surface) == 2:
         points, triangles = surface
-    elif hasattr(surface, "GetPoints") and hasattr(surface, "GetPolys"):  # vtkPolyData (VMTK)
+    elif hasattr(surface, "GetPoints") and hasattr(surface, "GetPolys"):  # vtkPolyData: VMTK, PyVista
         from vtkmodules.util.numpy_support import vtk_to_numpy
 
         points = vtk_to_numpy(surface.GetPoints().GetData())
@@ -125,8 +107,6 @@ def _surface_arrays(surface: SurfaceLike) -> Tuple[np.ndarray, np.ndarray]:
         if "triangle" not in surface.cells_dict:
             raise InputError("surface (meshio): has no triangle cells")
         points, triangles = surface.points, surface.cells_dict["triangle"]
-    elif hasattr(surface, "faces") and hasattr(surface, "points"):  # pyvista.PolyData
-        points, triangles = surface.points, _triangles(*_padded(surface.faces))
     else:
         raise TypeError(
             "surface: give a file path, (points, triangles) arrays, or a PyVista, meshio or VTK polydata "
@@ -155,17 +135,13 @@ _RADIUS = "MaximumInscribedSphereRadius"
 
 def _centerline_arrays(lines: CenterlinesLike) -> List[Tuple[np.ndarray, Optional[np.ndarray]]]:
     """Polylines of centerlines given as arrays or as polydata with lines."""
-    if hasattr(lines, "GetPoints") and hasattr(lines, "GetLines"):  # vtkPolyData (VMTK)
+    if hasattr(lines, "GetPoints") and hasattr(lines, "GetLines"):  # vtkPolyData: VMTK, PyVista
         from vtkmodules.util.numpy_support import vtk_to_numpy
 
         points = vtk_to_numpy(lines.GetPoints().GetData()).astype(np.float64)
         radius = lines.GetPointData().GetArray(_RADIUS)
         radii = vtk_to_numpy(radius).astype(np.float64) if radius is not None else None
         offsets, connectivity = _vtk_cells(lines.GetLines())
-    elif hasattr(lines, "lines") and hasattr(lines, "points") and hasattr(lines, "point_data"):  # pyvista
-        points = np.asarray(lines.points, dtype=np.float64)
-        radii = np.asarray(lines.point_data[_RADIUS], dtype=np.float64) if _RADIUS in lines.point_data else None
-        offsets, connectivity = _padded(lines.lines)
     else:
         a = np.asarray(lines, dtype=object if isinstance(lines, (list, tuple)) else np.float64)
         if a.dtype != object and a.ndim == 2:
