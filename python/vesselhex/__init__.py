@@ -362,7 +362,7 @@ class Mesh:
         counts = ", ".join(f"{np.count_nonzero(self.region == k)} {name}" for k, name in enumerate(REGIONS))
         return (
             f"<vesselhex.Mesh: {len(self.points)} nodes, {len(self.hexes)} hexes ({counts}), "
-            f"{len(self.branch_names)} branches, {self.length_unit}>"
+            f"{len(self.branch_names)} branch{'es' if len(self.branch_names) != 1 else ''}, {self.length_unit}>"
         )
 
 
