@@ -17,9 +17,7 @@ fn python_package_tests_pass() {
     let python = std::env::var("VESSELHEX_PYTHON").unwrap_or_else(|_| "python3".into());
     // Where the interpreter finds the package's Python half, so a wheel built from another
     // checkout (or an older one of this) is caught instead of tested.
-    let probe = Command::new(&python)
-        .args(["-c", "import pytest, vesselhex; print(vesselhex.__file__)"])
-        .output();
+    let probe = Command::new(&python).args(["-c", "import pytest, vesselhex; print(vesselhex.__file__)"]).output();
     let installed = match probe {
         Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).trim().to_string(),
         _ => {
