@@ -4,7 +4,7 @@
 //! the local maximal inscribed sphere radius of the centerline; lengths ending in `_mm` are
 //! absolute, in the *output* length unit's millimetre equivalent (internally mm).
 
-use crate::error::{Error, Result};
+use crate::error::{one_line, Error, Result};
 use crate::mesh::{Region, WallLayer};
 use crate::units::LengthUnit;
 use serde::{Deserialize, Serialize};
@@ -359,11 +359,27 @@ impl MeshConfig {
     pub fn from_case_file(path: &Path, forced_preset: Option<Preset>) -> Result<Self> {
         let bytes = crate::input::read_regular_file(path, MAX_CASE_FILE_BYTES, "cannot read the case file")?;
         let text = crate::input::text_of(bytes).map_err(|e| Error::input(path, e))?;
+        MeshConfig::from_case_text(&text, path, forced_preset, true)
+    }
+
+    /// The settings of a case file given as a table (the Python package's `config={...}`),
+    /// checked as a case file is; errors name `source` and the key, with no line (the table has
+    /// none). A relative `fe.template_dir` is taken from the current folder.
+    pub fn from_case_table(table: toml::Table, source: &Path, forced_preset: Option<Preset>) -> Result<Self> {
+        let text = toml::to_string(&table).map_err(|e| {
+            Error::input(source, format!("cannot be written as a case file: {}", one_line(&e.to_string())))
+        })?;
+        MeshConfig::from_case_text(&text, source, forced_preset, false)
+    }
+
+    /// A case file's text on top of a preset; errors name the line of the key when `lines`.
+    fn from_case_text(text: &str, path: &Path, forced_preset: Option<Preset>, lines: bool) -> Result<Self> {
+        let line_of_key = |text: &str, keys: &[&str]| if lines { line_of_key(text, keys) } else { None };
         let at = |e: &toml::de::Error| match e.span() {
-            Some(span) => format!("{}: ", place(&text, span.start)),
-            None => String::new(),
+            Some(span) if lines => format!("{}: ", place(text, span.start)),
+            _ => String::new(),
         };
-        let value: toml::Table = toml::from_str(&text)
+        let value: toml::Table = toml::from_str(text)
             .map_err(|e| Error::input(path, format!("{}not valid TOML: {}", at(&e), one_line(e.message()))))?;
         let mut value = value;
         crate::writers::material::check_removed_keys(&value, path)?;
@@ -379,7 +395,7 @@ impl MeshConfig {
         let mut config: MeshConfig = merged.try_into().map_err(|e: toml::de::Error| {
             let (table, message, field) = error_place(&e);
             let key: Vec<&str> = table.iter().chain(&field).map(String::as_str).collect();
-            let at = line_of_key(&text, &key).map_or(String::new(), |l| format!("line {l}: "));
+            let at = line_of_key(text, &key).map_or(String::new(), |l| format!("line {l}: "));
             let within = match (&field, table.is_empty()) {
                 (_, true) => String::new(),
                 (Some(_), false) => format!(" in [{}]", table.join(".")),
@@ -389,7 +405,7 @@ impl MeshConfig {
         })?;
         config.fe.template_dir = match config.fe.template_dir.take() {
             Some(dir) => Some(resolve_template_dir(path, &dir).map_err(|message| {
-                let at = line_of_key(&text, &["fe", "template_dir"]).map_or(String::new(), |l| format!("line {l}: "));
+                let at = line_of_key(text, &["fe", "template_dir"]).map_or(String::new(), |l| format!("line {l}: "));
                 Error::input(path, format!("{at}{message}"))
             })?),
             None => None,
@@ -399,7 +415,7 @@ impl MeshConfig {
                 // Messages start with the key: "lumen.core_elements: ...", "febio.element = ...".
                 let key = message.split([':', ' ', '=']).next().unwrap_or_default();
                 let keys: Vec<&str> = key.split('.').collect();
-                let at = line_of_key(&text, &keys).map_or(String::new(), |l| format!("line {l}: "));
+                let at = line_of_key(text, &keys).map_or(String::new(), |l| format!("line {l}: "));
                 Error::input(path, format!("{at}{message}"))
             }
             other => other,
@@ -562,11 +578,6 @@ fn place(text: &str, at: usize) -> String {
     let line = before.matches('\n').count() + 1;
     let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
     format!("line {line}, column {column}")
-}
-
-/// A message on one line.
-fn one_line(message: &str) -> String {
-    message.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" ")
 }
 
 /// Where a deserialisation error is: the key path it names (`in `lumen.radial_elements``), its

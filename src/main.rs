@@ -40,7 +40,7 @@ const MESH_HELP: &str = "Mesh a vessel: lumen (core + four lateral blocks per cr
 to an outer circle and intersected with the surface, graded towards the wall) and a three-layer wall (intima, media, \
 adventitia) grown from the lumen surface along its normal (or along the rays), with per-element triads, collagen fibres and quality figures.
 
-Parameters come from the preset, then the case file (--config, TOML), then these flags. Case-file keys (see README):
+Parameters come from the preset, then the case file (--config, TOML), then these flags. Case-file keys (docs/guide/case-file.md):
   preset, units, output_units, formats
   [centerline] resample_step, smoothing_passes, radius_smoothing_passes, trim_inlet, trim_outlet,
                junction_merge_radii, inlet_mm
@@ -54,11 +54,11 @@ Parameters come from the preset, then the case file (--config, TOML), then these
   [material.<layer>] c_kpa, k1_kpa, k2, kappa, bulk_kpa, density_kg_m3, youngs_modulus_kpa, poisson_ratio
 
 Formats (--formats): vtu, calculix, abaqus, febio, febio-fsi, openfoam, openfoam-fsi, fsi (implies openfoam and calculix).
-Outputs in --output: the formats' files and report.json (counts, quality, surface accuracy, timings), written beside
-it and put in its place in one rename: the folder holds the old result or the new one, never a mix. vesselhex
+Outputs in --output: the formats' files and report.json (counts, quality, surface accuracy, timings), written beside \
+it and put in its place in one rename: the folder holds the old result or the new one, never a mix. vesselhex \
 replaces only a folder that is empty or that it wrote (its report.json lists every file); --force replaces any.
 
-Exit codes: 0 success (warnings on stderr and in report.json), 1 error (nothing written), 2 usage error,
+Exit codes: 0 success (warnings on stderr and in report.json), 1 error (nothing written), 2 usage error, \
 130/143/129 interrupted by SIGINT/SIGTERM/SIGHUP (nothing written).";
 
 /// Most worker threads: beyond a few per core they only cost (their start-up grows with their
@@ -322,7 +322,7 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
     Ok(if ends.is_empty() { MeshOutcome::Complete } else { MeshOutcome::EndsNotMeshed })
 }
 
-/// Exit codes (see README): 0 success, 1 error, 2 usage error (clap's), 3 written but some
+/// Exit codes (docs/guide/command-line.md): 0 success, 1 error, 2 usage error (clap's), 3 written but some
 /// vessel ends not meshed (report.json `ends`), 128 + the signal number when interrupted (130
 /// SIGINT, 143 SIGTERM, 129 SIGHUP).
 const EXIT_ERROR: u8 = 1;
@@ -352,15 +352,10 @@ fn main() -> ExitCode {
         Ok(MeshOutcome::Complete) => ExitCode::SUCCESS,
         Ok(MeshOutcome::EndsNotMeshed) => ExitCode::from(EXIT_ENDS_NOT_MESHED),
         Err(e) => {
-            eprintln!("vesselhex: error: {}", one_line(&e.to_string()));
+            eprintln!("vesselhex: error: {}", vesselhex::error::one_line(&e.to_string()));
             ExitCode::from(EXIT_ERROR)
         }
     }
-}
-
-/// Text on one line (messages from dependencies may span several).
-fn one_line(text: &str) -> String {
-    text.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" ")
 }
 
 /// Prints clap's error on one line, `vesselhex: error: ...`, keeping its tip and usage; help and

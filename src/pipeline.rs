@@ -792,65 +792,30 @@ fn formats_to_write(config: &MeshConfig) -> Result<Vec<&str>> {
 pub fn run(request: &MeshRequest) -> Result<Report> {
     let config = &request.config;
     config.validate()?;
-    let formats = formats_to_write(config)?;
+    formats_to_write(config)?;
     let inputs: Vec<&Path> = [Some(&request.surface), request.centerlines.as_ref(), request.case_file.as_ref()]
         .into_iter()
         .flatten()
-        .chain(config.fe.template_dir.as_ref())
         .map(PathBuf::as_path)
         .collect();
-    let output = OutputFolder::claim(&request.output, &inputs, request.force)?;
+    let output = claim_output(&request.output, &inputs, config, request.force)?;
     let limits = ReadLimits::within(request.max_memory);
-    let mut warnings = request.warnings.clone();
-    warnings.extend(config.warnings());
     let mut progress = Progress::new(request.quiet, 9);
     progress.stage("reading");
-    let (surface, hygiene) = clean_surface(read_surface_within(&request.surface, config.units, &limits)?.0)?;
-    warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
+    let (surface, _) = read_surface_within(&request.surface, config.units, &limits)?;
     let centerline_units = request.centerline_units.unwrap_or(config.units);
-    let mut found_ends = None;
-    let (centerlines, centerline_path) = match &request.centerlines {
-        Some(path) => (read_centerlines_within(path, centerline_units, &limits)?, path.clone()),
-        None => {
-            let extraction = crate::centerline_extract::extract_centerlines(&surface, &request.extraction)?;
-            warnings.extend(extraction.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
-            found_ends = Some((extraction.ends.clone(), extraction.inlet));
-            (extraction.centerlines, PathBuf::from("(computed from the surface)"))
-        }
+    let centerlines = match &request.centerlines {
+        Some(path) => CenterlineSource::Given(read_centerlines_within(path, centerline_units, &limits)?),
+        None => CenterlineSource::Extract(request.extraction.clone()),
     };
-    let radius = crate::resources::median_radius(&centerlines, &surface);
-    check_lengths_against_radius(config, radius)?;
-    warnings.extend(unit_warning(radius, config.units, request.centerline_units));
-    let estimate = crate::resources::estimate_mesh(&centerlines, radius, config, surface.triangles.len());
-    crate::resources::check_fits(&estimate, request.max_memory, &centerline_path)?;
-    let meshed = mesh_vessel(&surface, &centerlines, config, &mut progress).map_err(|e| name_winding(e, &surface))?;
-
-    progress.stage("writing");
-    output.begin_writing()?;
-    let options = WriteOptions::from_config(config);
-    let mut outputs = Vec::new();
-    for f in &formats {
-        let write = writers::writer(f).expect("checked above");
-        outputs.extend(write(&meshed.mesh, &options, output.staging())?);
-    }
-    progress.finish();
-    let (ends, inlet) = found_ends.unwrap_or_else(|| centerline_ends(&centerlines));
-    let ends = end_reports(&ends, inlet, &meshed.tree, config.output_units.from_mm());
-    warnings.extend(ends_not_meshed(&ends, config.output_units));
-    let mut report = build_report(&meshed, &surface, &centerline_path, config, &progress.timings, warnings);
-    report.ends = ends;
-    report.input.hygiene = hygiene;
-    if request.reproducible {
-        report.timings_s.values_mut().for_each(|t| *t = 0.0);
-    }
-    // report.json lists every file written: it is also what marks the folder as vesselhex's.
-    outputs.push(PathBuf::from(crate::output::MARKER));
-    report.outputs = outputs.iter().map(|p| p.display().to_string()).collect();
-    let json = serde_json::to_string_pretty(&report)
-        .map_err(|e| Error::Config(format!("internal: cannot encode the report: {e}")))?;
-    writers::write_atomic(&output.staging().join(crate::output::MARKER), |w| w.write_all(json.as_bytes()))?;
-    output.commit()?;
-    Ok(report)
+    let settings = MeshSettings {
+        config: config.clone(),
+        centerline_units: request.centerline_units,
+        max_memory: request.max_memory,
+        warnings: request.warnings.clone(),
+    };
+    let vessel = mesh_surface(surface, centerlines, settings, &mut progress)?;
+    write_vessel(&vessel, config, output, request.reproducible, &mut progress)
 }
 
 /// Vessel radii (mm) outside which the units are probably wrong: a 50 um arteriole to a 30 mm
@@ -1083,6 +1048,137 @@ fn build_report(
         outputs: vec![],
         config: config.clone(),
     }
+}
+
+/// Where a vessel's centerlines come from.
+pub enum CenterlineSource {
+    /// Read from a file or handed over (millimetres).
+    Given(Centerlines),
+    /// Computed from the surface (see [`crate::centerline_extract`]).
+    Extract(crate::centerline_extract::ExtractOptions),
+}
+
+/// The settings of one meshing besides its inputs.
+#[derive(Debug, Clone)]
+pub struct MeshSettings {
+    pub config: MeshConfig,
+    /// Unit of the centerlines when it differs from the surface's (`config.units`): named in
+    /// the unit warning.
+    pub centerline_units: Option<crate::units::LengthUnit>,
+    /// The memory the run may plan to use: a mesh estimated to need more is refused before it
+    /// is built.
+    pub max_memory: u64,
+    /// Warnings found before the run, reported with the rest.
+    pub warnings: Vec<Warning>,
+}
+
+/// A vessel meshed and not yet written: the mesh and what its report needs. What `run` writes,
+/// and what the Python package holds.
+pub struct MeshedVessel {
+    pub meshed: Meshed,
+    pub surface: TriangleSurface,
+    /// Where the centerlines came from (a file, or `(computed from the surface)`).
+    pub centerline_source: PathBuf,
+    /// The centerlines the mesh was built on (millimetres).
+    pub centerlines: Centerlines,
+    /// The vessel's ends (found on the surface, or the given centerlines' ends) and which is
+    /// the inlet.
+    pub ends: Vec<VesselEnd>,
+    pub inlet: usize,
+    /// What surface hygiene changed.
+    pub hygiene: HygieneReport,
+    pub settings: MeshSettings,
+}
+
+/// Meshes a surface already read (millimetres) as `vesselhex mesh` does: the surface cleaned
+/// (see [`clean_surface`]), centerlines computed when not given, the settings' lengths and the vessel's units checked, the memory estimated
+/// before meshing. The caller's current progress stage (reading) lasts until meshing starts.
+pub fn mesh_surface(
+    surface: TriangleSurface,
+    centerlines: CenterlineSource,
+    mut settings: MeshSettings,
+    progress: &mut Progress,
+) -> Result<MeshedVessel> {
+    let config = &settings.config;
+    config.validate()?;
+    settings.warnings.extend(config.warnings());
+    let (surface, hygiene) = clean_surface(surface)?;
+    settings.warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
+    let (centerlines, centerline_source, (ends, inlet)) = match centerlines {
+        CenterlineSource::Given(centerlines) => {
+            let source = centerlines.source.clone();
+            let ends = centerline_ends(&centerlines);
+            (centerlines, source, ends)
+        }
+        CenterlineSource::Extract(options) => {
+            let extraction = crate::centerline_extract::extract_centerlines(&surface, &options)?;
+            settings.warnings.extend(extraction.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
+            let ends = (extraction.ends, extraction.inlet);
+            (extraction.centerlines, PathBuf::from("(computed from the surface)"), ends)
+        }
+    };
+    let radius = crate::resources::median_radius(&centerlines, &surface);
+    check_lengths_against_radius(config, radius)?;
+    settings.warnings.extend(unit_warning(radius, config.units, settings.centerline_units));
+    let estimate = crate::resources::estimate_mesh(&centerlines, radius, config, surface.triangles.len());
+    crate::resources::check_fits(&estimate, settings.max_memory, &centerline_source)?;
+    let meshed = mesh_vessel(&surface, &centerlines, config, progress).map_err(|e| name_winding(e, &surface))?;
+    Ok(MeshedVessel { meshed, surface, centerline_source, centerlines, ends, inlet, hygiene, settings })
+}
+
+/// Claims the output folder for writing `config`'s formats: `inputs` (and the case file's
+/// template folder) must not lie in it (see [`OutputFolder::claim`]).
+pub fn claim_output(output: &Path, inputs: &[&Path], config: &MeshConfig, force: bool) -> Result<OutputFolder> {
+    let inputs: Vec<&Path> = inputs.iter().copied().chain(config.fe.template_dir.as_deref()).collect();
+    OutputFolder::claim(output, &inputs, force)
+}
+
+/// Writes `config`'s formats of a meshed vessel into the claimed output folder, then
+/// report.json (listing every file), and puts the folder in place; returns the report.
+/// `config` is the vessel's own, or one that differs only in what the writers read (formats,
+/// output units, solver settings). `reproducible` zeroes the timings.
+pub fn write_vessel(
+    vessel: &MeshedVessel,
+    config: &MeshConfig,
+    output: OutputFolder,
+    reproducible: bool,
+    progress: &mut Progress,
+) -> Result<Report> {
+    config.validate()?;
+    let formats = formats_to_write(config)?;
+    progress.stage("writing");
+    output.begin_writing()?;
+    let options = WriteOptions::from_config(config);
+    let mut outputs = Vec::new();
+    for f in &formats {
+        let write = writers::writer(f).expect("checked above");
+        outputs.extend(write(&vessel.meshed.mesh, &options, output.staging())?);
+    }
+    progress.finish();
+    let mut report = vessel_report(vessel, config, &progress.timings);
+    if reproducible {
+        report.timings_s.values_mut().for_each(|t| *t = 0.0);
+    }
+    // report.json lists every file written: it is also what marks the folder as vesselhex's.
+    outputs.push(PathBuf::from(crate::output::MARKER));
+    report.outputs = outputs.iter().map(|p| p.display().to_string()).collect();
+    let json = serde_json::to_string_pretty(&report)
+        .map_err(|e| Error::Config(format!("internal: cannot encode the report: {e}")))?;
+    writers::write_atomic(&output.staging().join(crate::output::MARKER), |w| w.write_all(json.as_bytes()))?;
+    output.commit()?;
+    Ok(report)
+}
+
+/// The report of a meshed vessel as `write_vessel` would write it with `config`, without
+/// writing anything (no outputs listed); timings as given.
+pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(String, f64)]) -> Report {
+    let mut warnings = vessel.settings.warnings.clone();
+    let ends = end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, config.output_units.from_mm());
+    warnings.extend(ends_not_meshed(&ends, config.output_units));
+    let mut report = build_report(&vessel.meshed, &vessel.surface, &vessel.centerline_source, config, timings, warnings);
+    report.ends = ends;
+    report.input.hygiene = vessel.hygiene.clone();
+    report
 }
 
 #[cfg(test)]

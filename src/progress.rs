@@ -4,8 +4,13 @@
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::time::Instant;
 
+/// Called with the name of each stage as it starts.
+pub type StageListener = Box<dyn FnMut(&str) + Send>;
+
 pub struct Progress {
     bar: ProgressBar,
+    /// Told the name of each stage as it starts (the Python package's progress callback).
+    listener: Option<StageListener>,
     stage_start: Instant,
     stage: String,
     /// Finished stages and their durations, in order.
@@ -21,7 +26,14 @@ impl Progress {
                 .unwrap_or_else(|_| ProgressStyle::default_bar()),
         );
         bar.enable_steady_tick(std::time::Duration::from_millis(120));
-        Progress { bar, stage_start: Instant::now(), stage: String::new(), timings: Vec::new() }
+        Progress { bar, listener: None, stage_start: Instant::now(), stage: String::new(), timings: Vec::new() }
+    }
+
+    /// Progress that tells `listener` the name of each stage as it starts, with no display.
+    pub fn with_listener(listener: StageListener) -> Self {
+        let mut progress = Progress::new(true, 0);
+        progress.listener = Some(listener);
+        progress
     }
 
     /// Ends the current stage (recording its time) and starts `name`.
@@ -30,6 +42,9 @@ impl Progress {
         self.stage = name.to_string();
         self.stage_start = Instant::now();
         self.bar.set_message(name.to_string());
+        if let Some(listener) = &mut self.listener {
+            listener(name);
+        }
     }
 
     fn finish_stage(&mut self) {

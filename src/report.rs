@@ -60,10 +60,10 @@ pub struct JunctionReport {
     pub branches: Vec<String>,
     pub spine_axis: [f64; 3],
     /// How the wall grew from the junction's lumen-surface nodes: `smoothed_normal`, `normal`
-    /// or `ray` (the best of them, see README).
+    /// or `ray` (the best of them, see docs/guide/junctions.md).
     pub wall_growth: crate::volume::JunctionWall,
     /// Whether the transitions' lumen-surface nodes were slid on the triangles to raise the
-    /// worst element (see README).
+    /// worst element (see docs/guide/junctions.md).
     pub surface_nodes_slid: bool,
     /// Whether the optimisation also ran its pattern search (tried when the worst junction
     /// element is below 0.3).

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// Exit codes (README): 1 error, 2 usage error, 128 + signal when interrupted.
+/// Exit codes (docs/guide/command-line.md): 1 error, 2 usage error, 128 + signal when interrupted.
 const ERROR: i32 = 1;
 const USAGE: i32 = 2;
 
@@ -313,7 +313,7 @@ fn templates_come_from_their_own_folder_beside_the_case_file() {
     std::fs::create_dir_all(dir.join("calculix")).unwrap();
     let builtin = std::fs::read_to_string(crate_dir().join("templates/calculix/material_hgo.inp")).unwrap();
     std::fs::write(dir.join("calculix/material_hgo.inp"), format!("** my own material\n{builtin}")).unwrap();
-    // The README's own line, resolved against the case file's folder (the run's is elsewhere).
+    // The case-file guide's own line, resolved against the case file's folder (the run's is elsewhere).
     let case = c.write("case.toml", "[fe]\ntemplate_dir = \"my-templates\"\n");
     let o = c.mesh(&["--config", path_str(&case), "--formats", "calculix"]);
     assert_eq!(o.code, 0, "{}", o.stderr);

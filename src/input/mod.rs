@@ -1,6 +1,7 @@
 //! Reading what users bring: lumen surfaces (STL, VTP) and centerlines (VMTK .vtp, legacy .vtk,
 //! CSV). Everything leaves this module in millimetres (see [`crate::units`]).
 
+mod arrays;
 mod centerline;
 mod csv;
 mod hygiene;
@@ -15,6 +16,7 @@ use crate::error::{Error, Result};
 use crate::resources::short;
 pub use crate::resources::ReadLimits;
 use crate::units::LengthUnit;
+pub use arrays::{centerlines_from_arrays, surface_from_arrays, PolylineArrays};
 pub use hygiene::{clean_surface, HygieneReport};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
@@ -86,7 +88,7 @@ pub fn read_surface_within(
 ) -> Result<(TriangleSurface, SurfaceReadReport)> {
     let bad = |message: String| Error::input(path, message);
     let mut report = SurfaceReadReport::default();
-    let mut triangles = match extension(path).as_str() {
+    let triangles = match extension(path).as_str() {
         "stl" => {
             let mesh = stl::parse(&read_bytes(path, limits)?).map_err(bad)?;
             report.stl_vertices_merged = mesh.merged;
@@ -95,7 +97,19 @@ pub fn read_surface_within(
         "vtp" | "vtk" => surface::from_polydata(read_polydata(path, limits)?, &mut report),
         other => return Err(bad(unknown_extension(other, SURFACE_FORMATS))),
     };
-    surface::drop_degenerate(&mut triangles, &mut report);
+    Ok((checked_surface(triangles, units, path, &mut report)?, report))
+}
+
+/// The surface of `triangles` (in `units`) in millimetres, its degenerate triangles dropped
+/// (counted in `report`); refused when nothing is left, or a vertex is out of reach.
+fn checked_surface(
+    mut triangles: surface::Triangles,
+    units: LengthUnit,
+    path: &Path,
+    report: &mut SurfaceReadReport,
+) -> Result<TriangleSurface> {
+    let bad = |message: String| Error::input(path, message);
+    surface::drop_degenerate(&mut triangles, report);
     if triangles.triangles.is_empty() {
         let dropped = report.degenerate_triangles_dropped;
         let why = if dropped > 0 { format!(" (all {dropped} were degenerate)") } else { String::new() };
@@ -120,7 +134,7 @@ pub fn read_surface_within(
         triangle_tags: triangles.tags,
         source: path.to_path_buf(),
     };
-    Ok((surface, report))
+    Ok(surface)
 }
 
 /// Reads centerlines (VMTK .vtp, legacy .vtk or CSV) and converts lengths to millimetres.
@@ -144,6 +158,13 @@ pub fn read_centerlines_within(path: &Path, units: LengthUnit, limits: &ReadLimi
         }
         other => return Err(bad(unknown_extension(other, CENTERLINE_FORMATS))),
     };
+    checked_centerlines(polylines, units, path)
+}
+
+/// Polylines (in `units`) as centerlines in millimetres; refused when a radius is negative or
+/// not finite, a point or radius is out of reach, or a polyline is a closed loop.
+fn checked_centerlines(polylines: Vec<CenterlinePolyline>, units: LengthUnit, path: &Path) -> Result<Centerlines> {
+    let bad = |message: String| Error::input(path, message);
     if let Some(r) = polylines.iter().flat_map(|p| p.radii.iter().flatten()).find(|r| !r.is_finite() || **r < 0.0) {
         return Err(bad(format!("has a radius {r}; radii must be finite and non-negative")));
     }
