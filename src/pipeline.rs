@@ -790,13 +790,14 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
         .into_iter()
         .flatten()
         .chain(config.fe.template_dir.as_ref())
+        .chain(config.wall.surface.iter().chain(&config.wall.surfaces))
         .map(PathBuf::as_path)
         .collect();
     let output = OutputFolder::claim(&request.output, &inputs, request.force)?;
     let limits = ReadLimits::within(request.max_memory);
     let mut warnings = request.warnings.clone();
     warnings.extend(config.warnings());
-    let mut progress = Progress::new(request.quiet, 9);
+    let mut progress = Progress::new(request.quiet, 9 + crate::finishing::stages(config));
     progress.stage("reading");
     let (surface, _) = read_surface_within(&request.surface, config.units, &limits)?;
     let centerline_units = request.centerline_units.unwrap_or(config.units);
@@ -811,9 +812,12 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let radius = crate::resources::median_radius(&centerlines, &surface);
     check_lengths_against_radius(config, radius)?;
     warnings.extend(unit_warning(radius, config.units, request.centerline_units));
-    let estimate = crate::resources::estimate_mesh(&centerlines, radius, config, surface.triangles.len());
+    let mut estimate = crate::resources::estimate_mesh(&centerlines, radius, config, surface.triangles.len());
+    crate::finishing::scale_estimate(&mut estimate, config);
     crate::resources::check_fits(&estimate, request.max_memory, &centerline_path)?;
-    let meshed = mesh_vessel(&surface, &centerlines, config, &mut progress).map_err(|e| name_winding(e, &surface))?;
+    let mut meshed =
+        mesh_vessel(&surface, &centerlines, config, &mut progress).map_err(|e| name_winding(e, &surface))?;
+    let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, &mut progress)?;
 
     progress.stage("writing");
     output.begin_writing()?;
@@ -821,10 +825,12 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let mut outputs = Vec::new();
     for f in &formats {
         let write = writers::writer(f).expect("checked above");
-        outputs.extend(write(&meshed.mesh, &options, output.staging())?);
+        let mesh = crate::finishing::mesh_for_format(&meshed.mesh, f, config);
+        outputs.extend(write(&mesh, &options, output.staging())?);
     }
     progress.finish();
     let mut report = build_report(&meshed, &surface, &centerline_path, config, &progress.timings, warnings);
+    report.additions = additions.scaled(config.output_units.from_mm());
     if request.reproducible {
         report.timings_s.values_mut().for_each(|t| *t = 0.0);
     }
@@ -989,6 +995,7 @@ fn build_report(
         lumen: lumen_report(mesh),
         wall: wall_report(mesh),
         surface_accuracy: meshed.accuracy.clone(),
+        additions: Default::default(),
         branches,
         junctions,
         within_bars,

@@ -96,6 +96,9 @@ pub struct Report {
     pub lumen: RegionReport,
     pub wall: WallReport,
     pub surface_accuracy: SurfaceAccuracy,
+    /// Refinement, segmented walls and flow extensions, when asked for (nothing otherwise).
+    #[serde(flatten)]
+    pub additions: crate::finishing::Additions,
     pub branches: Vec<BranchReport>,
     pub junctions: Vec<JunctionReport>,
     /// Whether the mesh meets every quality bar ([`Bars`]); when not, `warnings` names the bar
