@@ -722,19 +722,13 @@ impl MeshConfig {
         self.material.validate()?;
         self.extensions.validate()?;
         self.refinement.validate()?;
-        if !w.surfaces.is_empty() {
-            if w.surface.is_none() {
-                return bad(
-                    "wall.surfaces",
-                    "the layers' surfaces need the outer wall's too: give --wall-surface or wall.surface",
-                );
-            }
-            if w.surfaces.len() != 2 {
-                return bad(
-                    "wall.surfaces",
-                    "must list the two surfaces between the layers, inside out: intima|media, then media|adventitia",
-                );
-            }
+        // That they need the outer wall's surface is checked when the run starts
+        // (finishing::check_wall_surfaces): --wall-surface comes after the case file.
+        if !w.surfaces.is_empty() && w.surfaces.len() != 2 {
+            return bad(
+                "wall.surfaces",
+                "must list the two surfaces between the layers, inside out: intima|media, then media|adventitia",
+            );
         }
         if let Some(dir) = &self.fe.template_dir {
             crate::writers::template::check_template_dir(dir)?;

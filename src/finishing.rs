@@ -69,6 +69,7 @@ pub fn finish(
     limits: &ReadLimits,
     progress: &mut Progress,
 ) -> Result<Additions> {
+    check_wall_surfaces(config)?;
     let mut additions = Additions::default();
     if !asked(config) {
         return Ok(additions);
@@ -122,6 +123,17 @@ pub fn finish(
         additions.extensions = Some(reports);
     }
     Ok(additions)
+}
+
+/// The layers' surfaces (`wall.surfaces`) need the outer wall's (`--wall-surface` or
+/// `wall.surface`), which the command line may give after the case file is read.
+pub fn check_wall_surfaces(config: &MeshConfig) -> Result<()> {
+    if !config.wall.surfaces.is_empty() && config.wall.surface.is_none() {
+        return Err(crate::error::Error::Config(
+            "wall.surfaces: the layers' surfaces need the outer wall's too: give --wall-surface or wall.surface".into(),
+        ));
+    }
+    Ok(())
 }
 
 /// Refines the mesh of `meshed` (its junction of each element follows).

@@ -793,6 +793,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
         .chain(config.wall.surface.iter().chain(&config.wall.surfaces))
         .map(PathBuf::as_path)
         .collect();
+    crate::finishing::check_wall_surfaces(config)?;
     let output = OutputFolder::claim(&request.output, &inputs, request.force)?;
     let limits = ReadLimits::within(request.max_memory);
     let mut warnings = request.warnings.clone();
