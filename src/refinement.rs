@@ -87,75 +87,100 @@ fn node_at(c: [usize; 3]) -> usize {
     xy + 4 * c[2]
 }
 
+/// The new nodes of a split, each made once: keyed by the coarse edge or face it lies on.
+struct NewNodes {
+    k: usize,
+    nodes: Vec<Point3<f64>>,
+    on_coarse: Vec<OnCoarse>,
+    edges: HashMap<(u32, u32, u16), u32>,
+    faces: HashMap<([u32; 3], u16, u16), u32>,
+}
+
+/// The trilinear place of lattice point `p` (k-ths along each axis) in an element.
+fn lattice_place(corners: &[Point3<f64>; 8], p: [usize; 3], k: usize) -> Point3<f64> {
+    let x = p.map(|x| x as f64 / k as f64);
+    let weight = |i: usize| {
+        let c = corner_of(i);
+        (0..3).map(|a| if c[a] == 1 { x[a] } else { 1.0 - x[a] }).product::<f64>()
+    };
+    Point3::from((0..8).fold(Vector3::zeros(), |acc, i| acc + corners[i].coords * weight(i)))
+}
+
+impl NewNodes {
+    fn push(&mut self, place: Point3<f64>, at: OnCoarse) -> u32 {
+        self.nodes.push(place);
+        self.on_coarse.push(at);
+        self.nodes.len() as u32 - 1
+    }
+
+    /// The node at lattice point `p` of element `hex` (corners `corners`), made if new.
+    fn at(&mut self, hex: &Hex, corners: &[Point3<f64>; 8], p: [usize; 3]) -> u32 {
+        let k = self.k;
+        let unit = |p: [usize; 3]| hex[node_at(p.map(|x| x / k))];
+        let inner: Vec<usize> = (0..3).filter(|&a| p[a] != 0 && p[a] != k).collect();
+        match inner.as_slice() {
+            [] => unit(p),
+            [a] => {
+                let (mut lo, mut hi) = (p, p);
+                (lo[*a], hi[*a]) = (0, k);
+                let (na, nb) = (unit(lo), unit(hi));
+                let (ends, m) = if na < nb { ([na, nb], p[*a]) } else { ([nb, na], k - p[*a]) };
+                let key = (ends[0], ends[1], m as u16);
+                match self.edges.get(&key) {
+                    Some(&id) => id,
+                    None => {
+                        let id = self.push(lattice_place(corners, p, k), OnCoarse::Edge { ends, m: m as u16 });
+                        *self.edges.entry(key).or_insert(id)
+                    }
+                }
+            }
+            [a, b] => self.face_node(hex, corners, p, (*a, *b)),
+            _ => self.push(lattice_place(corners, p, k), OnCoarse::Cell),
+        }
+    }
+
+    /// The node at lattice point `p` inside the face spanned by axes `a` and `b`: keyed by the
+    /// face's corners in a canonical cycle (lowest label first, then its lower neighbour).
+    fn face_node(&mut self, hex: &Hex, corners: &[Point3<f64>; 8], p: [usize; 3], (a, b): (usize, usize)) -> u32 {
+        let k = self.k;
+        let cycle: [[usize; 3]; 4] = [(0, 0), (k, 0), (k, k), (0, k)].map(|(x, y)| {
+            let mut c = p;
+            (c[a], c[b]) = (x, y);
+            c
+        });
+        let labels = cycle.map(|c| hex[node_at(c.map(|x| x / k))]);
+        let first = (0..4).min_by_key(|&i| labels[i]).expect("four corners");
+        let step = if labels[(first + 1) % 4] < labels[(first + 3) % 4] { 1 } else { 3 };
+        let order = [0, 1, 2, 3].map(|j| (first + j * step) % 4);
+        let face = order.map(|i| labels[i]);
+        let along = |to: usize| -> u16 {
+            let (o, t) = (cycle[order[0]], cycle[order[to]]);
+            ((0..3).map(|d| (p[d] as i64 - o[d] as i64) * (t[d] as i64 - o[d] as i64)).sum::<i64>() / k as i64) as u16
+        };
+        let (s, t) = (along(1), along(3));
+        let key = ([face[0], face[1], face[3]], s, t);
+        match self.faces.get(&key) {
+            Some(&id) => id,
+            None => {
+                let id = self.push(lattice_place(corners, p, k), OnCoarse::Face { corners: face, s, t });
+                *self.faces.entry(key).or_insert(id)
+            }
+        }
+    }
+}
+
 /// The mesh split `k`-fold per direction, new nodes where the coarse mesh puts them, and where
 /// each new node lies on the coarse mesh (by new node, from the coarse node count on).
 fn split(mesh: &VesselMesh, k: usize) -> (VesselMesh, Vec<OnCoarse>) {
     let n = k + 1;
-    let mut nodes = mesh.nodes.clone();
-    let mut on_coarse: Vec<OnCoarse> = Vec::new();
-    let mut edges: HashMap<(u32, u32, u16), u32> = HashMap::new();
-    let mut faces: HashMap<([u32; 3], u16, u16), u32> = HashMap::new();
+    let mut new =
+        NewNodes { k, nodes: mesh.nodes.clone(), on_coarse: Vec::new(), edges: HashMap::new(), faces: HashMap::new() };
     let mut hexes: Vec<Hex> = Vec::with_capacity(mesh.hexes.len() * k * k * k);
     let mut lattice = vec![0u32; n * n * n];
     for (e, hex) in mesh.hexes.iter().enumerate() {
         let corners = mesh.corners(e);
-        let place = |p: [usize; 3]| -> Point3<f64> {
-            let (u, v, w) = (p[0] as f64 / k as f64, p[1] as f64 / k as f64, p[2] as f64 / k as f64);
-            let weight = |i: usize| {
-                let c = corner_of(i);
-                let f = |c: usize, x: f64| if c == 1 { x } else { 1.0 - x };
-                f(c[0], u) * f(c[1], v) * f(c[2], w)
-            };
-            Point3::from((0..8).fold(Vector3::zeros(), |acc, i| acc + corners[i].coords * weight(i)))
-        };
         for (index, id) in lattice.iter_mut().enumerate() {
-            let p = [index % n, (index / n) % n, index / (n * n)];
-            let inner: Vec<usize> = (0..3).filter(|&a| p[a] != 0 && p[a] != k).collect();
-            let unit = |p: [usize; 3]| p.map(|x| x / k);
-            *id = match inner.as_slice() {
-                [] => hex[node_at(unit(p))],
-                [a] => {
-                    let (mut lo, mut hi) = (p, p);
-                    (lo[*a], hi[*a]) = (0, k);
-                    let (na, nb) = (hex[node_at(unit(lo))], hex[node_at(unit(hi))]);
-                    let (ends, m) = if na < nb { ([na, nb], p[*a]) } else { ([nb, na], k - p[*a]) };
-                    *edges.entry((ends[0], ends[1], m as u16)).or_insert_with(|| {
-                        nodes.push(place(p));
-                        on_coarse.push(OnCoarse::Edge { ends, m: m as u16 });
-                        nodes.len() as u32 - 1
-                    })
-                }
-                [a, b] => {
-                    // The face's corners in a cycle, as lattice points and labels.
-                    let cycle: [[usize; 3]; 4] = [(0, 0), (k, 0), (k, k), (0, k)].map(|(x, y)| {
-                        let mut c = p;
-                        (c[*a], c[*b]) = (x, y);
-                        c
-                    });
-                    let labels = cycle.map(|c| hex[node_at(unit(c))]);
-                    let first = (0..4).min_by_key(|&i| labels[i]).expect("four corners");
-                    let (next, prev) = ((first + 1) % 4, (first + 3) % 4);
-                    let step = if labels[next] < labels[prev] { 1 } else { 3 };
-                    let order = [0, 1, 2, 3].map(|j| (first + j * step) % 4);
-                    let corners = order.map(|i| labels[i]);
-                    let along = |to: usize| -> u16 {
-                        let (o, t) = (cycle[order[0]], cycle[order[to]]);
-                        ((0..3).map(|d| (p[d] as i64 - o[d] as i64) * (t[d] as i64 - o[d] as i64)).sum::<i64>()
-                            / k as i64) as u16
-                    };
-                    let (s, t) = (along(1), along(3));
-                    *faces.entry(([corners[0], corners[1], corners[3]], s, t)).or_insert_with(|| {
-                        nodes.push(place(p));
-                        on_coarse.push(OnCoarse::Face { corners, s, t });
-                        nodes.len() as u32 - 1
-                    })
-                }
-                _ => {
-                    nodes.push(place(p));
-                    on_coarse.push(OnCoarse::Cell);
-                    nodes.len() as u32 - 1
-                }
-            };
+            *id = new.at(hex, &corners, [index % n, (index / n) % n, index / (n * n)]);
         }
         for child in 0..k * k * k {
             let (x, y, z) = (child % k, (child / k) % k, child / (k * k));
@@ -166,11 +191,10 @@ fn split(mesh: &VesselMesh, k: usize) -> (VesselMesh, Vec<OnCoarse>) {
         }
     }
     let cubes = k * k * k;
-    let repeat = |v: &[Region]| v.iter().flat_map(|r| std::iter::repeat_n(*r, cubes)).collect::<Vec<_>>();
     let refined = VesselMesh {
-        nodes,
+        nodes: new.nodes,
         hexes,
-        regions: repeat(&mesh.regions),
+        regions: mesh.regions.iter().flat_map(|r| std::iter::repeat_n(*r, cubes)).collect(),
         branch_of: mesh.branch_of.iter().flat_map(|b| std::iter::repeat_n(*b, cubes)).collect(),
         triads: Vec::new(),
         fibres: Vec::new(),
@@ -181,11 +205,11 @@ fn split(mesh: &VesselMesh, k: usize) -> (VesselMesh, Vec<OnCoarse>) {
             .map(|l| crate::mesh::WallLayer { radial_elements: l.radial_elements * k, ..l.clone() })
             .collect(),
         ends: mesh.ends.clone(),
-        node_sets: refined_node_sets(mesh, &on_coarse),
+        node_sets: refined_node_sets(mesh, &new.on_coarse),
         face_sets: refined_face_sets(mesh, k),
         branch_names: mesh.branch_names.clone(),
     };
-    (refined, on_coarse)
+    (refined, new.on_coarse)
 }
 
 /// Node sets of the split mesh: a new node belongs to a set when every corner of the coarse edge
@@ -322,6 +346,86 @@ fn radial_maps(mesh: &VesselMesh) -> (Vec<u32>, Vec<u32>) {
     (inward, outward)
 }
 
+/// The column below lumen-surface node `s` of the split mesh: it and the `steps` lumen nodes
+/// down to the core boundary, outside in.
+fn column_below(mesh: &VesselMesh, inward: &[u32], s: u32, steps: usize) -> Result<Vec<u32>> {
+    let mut column = vec![s];
+    for _ in 0..steps {
+        let next = inward[*column.last().expect("one node") as usize];
+        if next == u32::MAX {
+            let p = mesh.nodes[s as usize];
+            return Err(Error::Geometry(format!(
+                "refinement: the lumen-surface node at ({:.3}, {:.3}, {:.3}) mm has no ray of {steps} lumen elements \
+                 below it",
+                p.x, p.y, p.z
+            )));
+        }
+        column.push(next);
+    }
+    Ok(column)
+}
+
+/// Where new lumen-surface node `p` goes: on the smooth surface through the coarse nodes at its
+/// place on the coarse mesh, or where the ray from `origin` (its column's core-boundary node)
+/// through it meets the triangles.
+fn target(
+    placement: Placement,
+    smooth: &SmoothSurface,
+    at: OnCoarse,
+    k: usize,
+    p: Point3<f64>,
+    origin: Point3<f64>,
+) -> Result<Point3<f64>> {
+    let triangles = match placement {
+        Placement::AfterProjection => {
+            return Ok(match at {
+                OnCoarse::Edge { ends, m } => smooth.edge(ends[0], ends[1], m as f64 / k as f64),
+                OnCoarse::Face { corners, s, t } => smooth.face(corners, s as f64 / k as f64, t as f64 / k as f64),
+                OnCoarse::Cell => p,
+            })
+        }
+        Placement::BeforeProjection(triangles) => triangles,
+    };
+    let reach = (p - origin).norm();
+    let hit = triangles.first_hit(&origin, &((p - origin) / reach), 3.0 * reach).ok_or_else(|| {
+        let at = |q: Point3<f64>| format!("({:.3}, {:.3}, {:.3}) mm", q.x, q.y, q.z);
+        Error::Geometry(format!(
+            "refinement before projection: the ray from {} through the new lumen-surface node at {} meets the \
+             surface {} nowhere within {:.3} mm",
+            at(origin),
+            at(p),
+            triangles.source.display(),
+            3.0 * reach
+        ))
+    })?;
+    Ok(hit.point)
+}
+
+/// The moves a surface node's move `delta` carries along its column: the lumen nodes below in
+/// proportion to their distance from the core boundary (so they stay on the straight ray to the
+/// new surface node), the wall nodes above (`outward` from it) in full.
+fn carried(
+    mesh: &VesselMesh,
+    column: &[u32],
+    outward: &[u32],
+    delta: Vector3<f64>,
+    moves: &mut Vec<(u32, Vector3<f64>)>,
+) {
+    let lengths: Vec<f64> =
+        column.windows(2).map(|w| (mesh.nodes[w[0] as usize] - mesh.nodes[w[1] as usize]).norm()).collect();
+    let total: f64 = lengths.iter().sum();
+    let mut below = total;
+    for (j, &n) in column.iter().enumerate().skip(1).take(column.len() - 2) {
+        below -= lengths[j - 1];
+        moves.push((n, delta * (below / total)));
+    }
+    let mut n = outward[column[0] as usize];
+    while n != u32::MAX {
+        moves.push((n, delta));
+        n = outward[n as usize];
+    }
+}
+
 /// Splits every element `k`-fold per direction and places the new lumen-surface nodes as asked.
 /// `radial_cells` is the number of lumen elements along a ray of `mesh` (`lumen.radial_elements`
 /// for a mesh not refined before). The result is annotated.
@@ -332,65 +436,15 @@ pub fn refine(mesh: &VesselMesh, k: usize, placement: Placement, radial_cells: u
     let (inward, outward) = radial_maps(&refined);
     let surface: Vec<u32> =
         refined.node_sets[sets::INTERFACE_NODES].iter().copied().filter(|&n| n as usize >= first_new).collect();
-    let steps = radial_cells * k;
     let mut moves: Vec<(u32, Vector3<f64>)> = Vec::with_capacity(surface.len());
     let mut targets: Vec<(u32, Point3<f64>)> = Vec::with_capacity(surface.len());
     for &s in &surface {
+        let column = column_below(&refined, &inward, s, radial_cells * k)?;
         let p = refined.nodes[s as usize];
-        let mut column = vec![s];
-        for _ in 0..steps {
-            let next = inward[*column.last().expect("one node") as usize];
-            if next == u32::MAX {
-                return Err(Error::Geometry(format!(
-                    "refinement: the lumen-surface node at ({:.3}, {:.3}, {:.3}) mm has no ray of {steps} lumen elements \
-                     below it",
-                    p.x, p.y, p.z
-                )));
-            }
-            column.push(next);
-        }
-        let target = match placement {
-            Placement::AfterProjection => match on_coarse[s as usize - first_new] {
-                OnCoarse::Edge { ends, m } => smooth.edge(ends[0], ends[1], m as f64 / k as f64),
-                OnCoarse::Face { corners, s, t } => smooth.face(corners, s as f64 / k as f64, t as f64 / k as f64),
-                OnCoarse::Cell => p,
-            },
-            Placement::BeforeProjection(triangles) => {
-                let origin = refined.nodes[*column.last().expect("the core boundary") as usize];
-                let reach = (p - origin).norm();
-                let hit = triangles.first_hit(&origin, &((p - origin) / reach), 3.0 * reach).ok_or_else(|| {
-                    Error::Geometry(format!(
-                        "refinement before projection: the ray from ({:.3}, {:.3}, {:.3}) mm through the new \
-                         lumen-surface node at ({:.3}, {:.3}, {:.3}) mm meets the surface {} nowhere within {:.3} mm",
-                        origin.x,
-                        origin.y,
-                        origin.z,
-                        p.x,
-                        p.y,
-                        p.z,
-                        triangles.source.display(),
-                        3.0 * reach
-                    ))
-                })?;
-                hit.point
-            }
-        };
-        let delta = target - p;
-        // The lumen nodes below in proportion to their distance from the core boundary.
-        let lengths: Vec<f64> =
-            column.windows(2).map(|w| (refined.nodes[w[0] as usize] - refined.nodes[w[1] as usize]).norm()).collect();
-        let total: f64 = lengths.iter().sum();
-        let mut below = total;
-        for (j, &n) in column.iter().enumerate().skip(1).take(steps - 1) {
-            below -= lengths[j - 1];
-            moves.push((n, delta * (below / total)));
-        }
-        let mut n = outward[s as usize];
-        while n != u32::MAX {
-            moves.push((n, delta));
-            n = outward[n as usize];
-        }
-        targets.push((s, target));
+        let origin = refined.nodes[*column.last().expect("the core boundary") as usize];
+        let goal = target(placement, &smooth, on_coarse[s as usize - first_new], k, p, origin)?;
+        carried(&refined, &column, &outward, goal - p, &mut moves);
+        targets.push((s, goal));
     }
     for (n, d) in moves {
         refined.nodes[n as usize] += d;
