@@ -81,13 +81,12 @@ pub fn extend(mesh: &mut VesselMesh, config: &ExtensionsConfig) -> Result<Vec<Ex
     check_end_names(mesh, config)?;
     let ends: Vec<VesselEnd> = mesh.ends.iter().filter(|e| config.extends(&e.name)).cloned().collect();
     let mut reports = Vec::new();
-    let mut wall_nodes: Vec<u32> = Vec::new();
-    let mut wall_faces: Vec<ElementFace> = Vec::new();
+    let mut wall = ExtensionWall::default();
     for end in &ends {
         let section = end_section(mesh, end)?;
         let length = config.length_of(&end.name, end.is_inlet) * section.radius;
         let first = mesh.hexes.len();
-        let (stations, end_centre) = sweep(mesh, end, &section, length, config, &mut wall_nodes, &mut wall_faces);
+        let (stations, end_centre) = sweep(mesh, end, &section, length, config, &mut wall);
         let elements = first..mesh.hexes.len();
         if let Some(e) = elements.clone().find(|&e| !(mesh.quality[e].scaled_jacobian > 0.0)) {
             return Err(Error::Geometry(format!(
@@ -116,10 +115,10 @@ pub fn extend(mesh: &mut VesselMesh, config: &ExtensionsConfig) -> Result<Vec<Ex
             equiangle_skew: Stats::of(quality.iter().map(|q| q.equiangle_skew)),
         });
     }
-    wall_nodes.sort_unstable();
-    wall_faces.sort_unstable();
-    mesh.node_sets.insert(sets::EXTENSION_WALL.into(), wall_nodes);
-    mesh.face_sets.insert(sets::EXTENSION_WALL.into(), wall_faces);
+    wall.nodes.sort_unstable();
+    wall.faces.sort_unstable();
+    mesh.node_sets.insert(sets::EXTENSION_WALL.into(), wall.nodes);
+    mesh.face_sets.insert(sets::EXTENSION_WALL.into(), wall.faces);
     Ok(reports)
 }
 
@@ -232,6 +231,13 @@ fn smoothstep(x: f64) -> f64 {
     x * x * (3.0 - 2.0 * x)
 }
 
+/// The extension's sets gathered over every end: its wall's nodes and faces.
+#[derive(Default)]
+struct ExtensionWall {
+    nodes: Vec<u32>,
+    faces: Vec<ElementFace>,
+}
+
 /// Sweeps the extension of one end onto the mesh: its nodes, elements (annotated), sets. Returns
 /// the stations added and the centre of the extended end.
 fn sweep(
@@ -240,17 +246,38 @@ fn sweep(
     section: &EndSection,
     length: f64,
     config: &ExtensionsConfig,
-    wall_nodes: &mut Vec<u32>,
-    wall_faces: &mut Vec<ElementFace>,
+    wall: &mut ExtensionWall,
 ) -> (usize, Point3<f64>) {
     let stations = ((length / section.element_length).round() as usize).max(1);
+    let new_ids = station_nodes(mesh, section, length, stations, config, wall);
+    let end_faces = station_elements(mesh, section, &new_ids, wall);
+    let mut end_nodes: Vec<u32> = new_ids[stations - 1].clone();
+    end_nodes.sort_unstable();
+    // The end's sets move to the extended end; the vessel's own end section becomes `cut_E`.
+    let set = sets::lumen_end(&end.name);
+    let cut_nodes = std::mem::replace(mesh.node_sets.get_mut(&set).expect("read above"), end_nodes);
+    mesh.node_sets.insert(sets::cut(&end.name), cut_nodes);
+    let cut_faces = std::mem::replace(mesh.face_sets.get_mut(&set).expect("read above"), end_faces);
+    mesh.face_sets.insert(sets::cut(&end.name), cut_faces);
+    (stations, section.centre + section.normal * length)
+}
+
+/// The nodes of every station (1 to `stations`) beyond the end section, by station and by
+/// position in `section.nodes`; the extension wall's among them gathered in `wall`.
+fn station_nodes(
+    mesh: &mut VesselMesh,
+    section: &EndSection,
+    length: f64,
+    stations: usize,
+    config: &ExtensionsConfig,
+    wall: &mut ExtensionWall,
+) -> Vec<Vec<u32>> {
     let blend = match config.shape {
         ExtensionShape::Cylinder => config.blend_length * section.radius,
         ExtensionShape::Section => f64::INFINITY,
     };
     let weight = |t: f64| if blend == 0.0 { 1.0 } else { smoothstep(t / blend) };
     let (c, d) = (section.centre, section.normal);
-    // Node `x` of the section at station j: new_ids[j - 1][position of x in section.nodes].
     let on_surface: Vec<bool> = {
         let interface = &mesh.node_sets[sets::INTERFACE_NODES];
         section.nodes.iter().map(|n| interface.binary_search(n).is_ok()).collect()
@@ -259,24 +286,32 @@ fn sweep(
     for j in 1..=stations {
         let t = length * j as f64 / stations as f64;
         let w = weight(t);
-        let ids: Vec<u32> = section
-            .nodes
-            .iter()
-            .zip(&on_surface)
-            .map(|(&n, &surface)| {
-                let p = mesh.nodes[n as usize];
-                let q = Vector2::new((p - c).dot(&section.basis[0]), (p - c).dot(&section.basis[1]));
-                let shift = if w == 0.0 { Vector2::zeros() } else { (section.on_circle(&q) - q) * w };
-                let id = mesh.nodes.len() as u32;
-                mesh.nodes.push(p + d * t + section.basis[0] * shift.x + section.basis[1] * shift.y);
-                if surface {
-                    wall_nodes.push(id);
-                }
-                id
-            })
-            .collect();
+        let mut ids = Vec::with_capacity(section.nodes.len());
+        for (&n, &surface) in section.nodes.iter().zip(&on_surface) {
+            let p = mesh.nodes[n as usize];
+            let q = Vector2::new((p - c).dot(&section.basis[0]), (p - c).dot(&section.basis[1]));
+            let shift = if w == 0.0 { Vector2::zeros() } else { (section.on_circle(&q) - q) * w };
+            let id = mesh.nodes.len() as u32;
+            mesh.nodes.push(p + d * t + section.basis[0] * shift.x + section.basis[1] * shift.y);
+            if surface {
+                wall.nodes.push(id);
+            }
+            ids.push(id);
+        }
         new_ids.push(ids);
     }
+    new_ids
+}
+
+/// The extension's elements, station by station, each continuing the end element below it (same
+/// local axes, one station further), annotated; their wall faces gathered in `wall`. Returns
+/// the faces of the extended end.
+fn station_elements(
+    mesh: &mut VesselMesh,
+    section: &EndSection,
+    new_ids: &[Vec<u32>],
+    wall: &mut ExtensionWall,
+) -> Vec<ElementFace> {
     let at = |j: usize, node: u32| -> u32 {
         if j == 0 {
             return node;
@@ -289,44 +324,41 @@ fn sweep(
         .iter()
         .map(|f| lumen_faces.binary_search(&ElementFace { element: f.element, face: FACE_OUTER as u8 }).is_ok())
         .collect();
+    let stations = new_ids.len();
     let mut end_faces = Vec::new();
     for j in 1..=stations {
         for (f, &on_wall) in section.faces.iter().zip(&outer) {
             let h = mesh.hexes[f.element as usize];
-            // The new element continues the end element: same local axes, one station further.
+            // Downstream end: the end face is the top (4-7), the new element stands on it;
+            // upstream: it is the bottom (0-3), the new element lies below it.
             let hex: Hex = if f.face as usize == FACE_DOWNSTREAM {
-                let top = [h[4], h[5], h[6], h[7]];
-                [top, top].concat().iter().enumerate().map(|(i, &n)| at(j - 1 + i / 4, n)).collect::<Vec<_>>()
+                std::array::from_fn(|i| at(j - 1 + i / 4, h[4 + i % 4]))
             } else {
-                let bottom = [h[0], h[1], h[2], h[3]];
-                [bottom, bottom].concat().iter().enumerate().map(|(i, &n)| at(j - i / 4, n)).collect::<Vec<_>>()
-            }
-            .try_into()
-            .expect("eight corners");
-            let e = mesh.hexes.len() as u32;
-            mesh.hexes.push(hex);
-            mesh.regions.push(Region::Extension);
-            mesh.branch_of.push(mesh.branch_of[f.element as usize]);
-            let corners = mesh.corners(e as usize);
-            mesh.triads.push(element_triad(&corners));
-            mesh.fibres.push([Vector3::zeros(); 2]);
-            mesh.quality.push(element_quality(&corners));
+                std::array::from_fn(|i| at(j - i / 4, h[i % 4]))
+            };
+            let e = push_element(mesh, hex, mesh.branch_of[f.element as usize]);
             if on_wall {
-                wall_faces.push(ElementFace { element: e, face: FACE_OUTER as u8 });
+                wall.faces.push(ElementFace { element: e, face: FACE_OUTER as u8 });
             }
             if j == stations {
                 end_faces.push(ElementFace { element: e, face: f.face });
             }
         }
     }
-    let mut end_nodes: Vec<u32> = new_ids[stations - 1].clone();
-    end_nodes.sort_unstable();
-    let set = sets::lumen_end(&end.name);
-    let cut_nodes = std::mem::replace(mesh.node_sets.get_mut(&set).expect("read above"), end_nodes);
-    mesh.node_sets.insert(sets::cut(&end.name), cut_nodes);
-    let cut_faces = std::mem::replace(mesh.face_sets.get_mut(&set).expect("read above"), end_faces);
-    mesh.face_sets.insert(sets::cut(&end.name), cut_faces);
-    (stations, c + d * length)
+    end_faces
+}
+
+/// Appends an extension element, annotated; its index.
+fn push_element(mesh: &mut VesselMesh, hex: Hex, branch: u32) -> u32 {
+    let e = mesh.hexes.len() as u32;
+    mesh.hexes.push(hex);
+    mesh.regions.push(Region::Extension);
+    mesh.branch_of.push(branch);
+    let corners = mesh.corners(e as usize);
+    mesh.triads.push(element_triad(&corners));
+    mesh.fibres.push([Vector3::zeros(); 2]);
+    mesh.quality.push(element_quality(&corners));
+    e
 }
 
 /// The mesh without its flow extensions: the vessel as vesselhex meshes it without them, with

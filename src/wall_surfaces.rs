@@ -102,6 +102,10 @@ fn at(p: &Point3<f64>) -> String {
     format!("({:.3}, {:.3}, {:.3}) mm", p.x, p.y, p.z)
 }
 
+/// The surfaces a column meets, inside out, each with the wall level (nodes from the lumen,
+/// the lumen-surface node being 0) that lands on it.
+type Boundaries<'a> = Vec<(usize, &'a WallSurface)>;
+
 /// Moves the wall's nodes onto the segmented surfaces: `layers` are the surfaces between the
 /// layers, inside out (none, or one fewer than the mesh's layers), `outer` the outer wall's;
 /// `lumen` is the lumen surface (a column's line must not run through it). Re-annotates the mesh.
@@ -111,6 +115,33 @@ pub fn place(
     layers: &[WallSurface],
     outer: &WallSurface,
 ) -> Result<WallSurfacesReport> {
+    let boundaries = boundaries(mesh, layers, outer)?;
+    let columns = columns(mesh);
+    let nodes = &mesh.nodes;
+    let placed: Vec<Result<Placed>> = columns.par_iter().map(|c| place_column(nodes, c, &boundaries, lumen)).collect();
+    let (mut grown, mut thickness) = (Vec::with_capacity(columns.len()), Vec::with_capacity(columns.len()));
+    for (c, result) in columns.iter().zip(placed) {
+        let placed = result?;
+        for (&n, p) in c.wall.iter().zip(placed.points) {
+            mesh.nodes[n as usize] = p;
+        }
+        grown.push(placed.grown);
+        thickness.push(placed.thickness);
+    }
+    crate::annotate::annotate(mesh);
+    check_not_inverted(mesh, outer)?;
+    Ok(WallSurfacesReport {
+        outer: outer.surface.source.display().to_string(),
+        layers: layers.iter().map(|s| s.surface.source.display().to_string()).collect(),
+        columns: columns.len(),
+        grown_thickness: Stats::of(grown),
+        thickness: Stats::of(thickness),
+    })
+}
+
+/// Which wall level lands on which surface: each layer surface at the outer level of its layer,
+/// the outer surface at the wall's outermost level.
+fn boundaries<'a>(mesh: &VesselMesh, layers: &'a [WallSurface], outer: &'a WallSurface) -> Result<Boundaries<'a>> {
     let cells: Vec<usize> = mesh.layers.iter().map(|l| l.radial_elements).collect();
     if !layers.is_empty() && layers.len() + 1 != cells.len() {
         return Err(Error::Config(format!(
@@ -120,84 +151,73 @@ pub fn place(
             cells.len()
         )));
     }
-    // Wall levels (from the lumen, 0) where a surface stands, and which.
-    let total: usize = cells.iter().sum();
-    let mut boundaries: Vec<(usize, &WallSurface)> = Vec::new();
+    let mut boundaries = Vec::new();
     let mut level = 0;
     for (l, surface) in layers.iter().enumerate() {
         level += cells[l];
         boundaries.push((level, surface));
     }
-    boundaries.push((total, outer));
-    let columns = columns(mesh);
-    let nodes = &mesh.nodes;
-    let placed: Vec<Result<(Vec<Point3<f64>>, f64, f64)>> = columns
-        .par_iter()
-        .map(|c| {
-            let base = nodes[c.base as usize];
-            if c.wall.len() != total {
-                return Err(Error::Geometry(format!(
-                    "wall surfaces: the lumen-surface node at {} has {} wall nodes above it, not {total}",
-                    at(&base),
-                    c.wall.len()
-                )));
-            }
-            let top = nodes[c.wall[total - 1] as usize];
-            let grown = (top - base).norm();
-            let dir = (top - base) / grown;
-            // Distance of each wall node from the base, as grown.
-            let depth: Vec<f64> = c.wall.iter().map(|&n| (nodes[n as usize] - base).dot(&dir)).collect();
-            let hits = boundaries
-                .iter()
-                .map(|(_, s)| hit(s, &base, &dir, grown))
-                .collect::<Result<Vec<(f64, Point3<f64>)>>>()?;
-            check_order(&hits, &boundaries, &base)?;
-            check_clear_of_lumen(lumen, &base, &dir, hits[hits.len() - 1].0, grown)?;
-            // Each wall node keeps its share of its layer (between the surfaces around it).
-            let mut out = Vec::with_capacity(total);
-            let (mut from_level, mut from_depth, mut from_new) = (0usize, 0.0, 0.0);
-            for ((to_level, _), (to_new, point)) in boundaries.iter().zip(&hits) {
-                let to_depth = depth[to_level - 1];
-                for j in from_level + 1..*to_level {
-                    let share = (depth[j - 1] - from_depth) / (to_depth - from_depth);
-                    out.push(base + dir * (from_new + share * (to_new - from_new)));
-                }
-                out.push(*point);
-                (from_level, from_depth, from_new) = (*to_level, to_depth, *to_new);
-            }
-            Ok((out, grown, hits[hits.len() - 1].0))
-        })
-        .collect();
-    let (mut grown, mut thickness) = (Vec::with_capacity(columns.len()), Vec::with_capacity(columns.len()));
-    for (c, result) in columns.iter().zip(placed) {
-        let (points, before, after) = result?;
-        for (&n, p) in c.wall.iter().zip(points) {
-            mesh.nodes[n as usize] = p;
-        }
-        grown.push(before);
-        thickness.push(after);
-    }
-    crate::annotate::annotate(mesh);
-    if let Some(e) = mesh.wall_range().find(|&e| !(mesh.quality[e].scaled_jacobian > 0.0)) {
-        let c = crate::mesh::element_centre(&mesh.corners(e));
+    boundaries.push((cells.iter().sum(), outer));
+    Ok(boundaries)
+}
+
+/// A column's wall nodes on the segmented surfaces, and its wall thickness before and after.
+struct Placed {
+    points: Vec<Point3<f64>>,
+    grown: f64,
+    thickness: f64,
+}
+
+/// Places one column's wall nodes: the line from its lumen-surface node through its grown outer
+/// node is continued to each surface; each node between two surfaces keeps its share of the
+/// layer between them.
+fn place_column(nodes: &[Point3<f64>], c: &Column, boundaries: &Boundaries, lumen: &LumenSurface) -> Result<Placed> {
+    let base = nodes[c.base as usize];
+    let total = boundaries[boundaries.len() - 1].0;
+    if c.wall.len() != total {
         return Err(Error::Geometry(format!(
-            "wall surfaces: wall element {} ({}) near {} is inverted (scaled Jacobian {:.3}) once the wall follows {}: \
-             the segmented surfaces turn faster there than the lumen's columns can follow (try wall.growth = \
-             \"ray\", or smooth the surfaces)",
-            e + 1,
-            mesh.regions[e].name(),
-            at(&c),
-            mesh.quality[e].scaled_jacobian,
-            outer.surface.source.display()
+            "wall surfaces: the lumen-surface node at {} has {} wall nodes above it, not {total}",
+            at(&base),
+            c.wall.len()
         )));
     }
-    Ok(WallSurfacesReport {
-        outer: outer.surface.source.display().to_string(),
-        layers: layers.iter().map(|s| s.surface.source.display().to_string()).collect(),
-        columns: columns.len(),
-        grown_thickness: Stats::of(grown),
-        thickness: Stats::of(thickness),
-    })
+    let top = nodes[c.wall[total - 1] as usize];
+    let grown = (top - base).norm();
+    let dir = (top - base) / grown;
+    // Distance of each wall node from the base, as grown.
+    let depth: Vec<f64> = c.wall.iter().map(|&n| (nodes[n as usize] - base).dot(&dir)).collect();
+    let hits =
+        boundaries.iter().map(|(_, s)| hit(s, &base, &dir, grown)).collect::<Result<Vec<(f64, Point3<f64>)>>>()?;
+    check_order(&hits, boundaries, &base)?;
+    check_clear_of_lumen(lumen, &base, &dir, hits[hits.len() - 1].0, grown)?;
+    let mut points = Vec::with_capacity(total);
+    let (mut from_level, mut from_depth, mut from_new) = (0usize, 0.0, 0.0);
+    for ((to_level, _), (to_new, point)) in boundaries.iter().zip(&hits) {
+        let to_depth = depth[to_level - 1];
+        for j in from_level + 1..*to_level {
+            let share = (depth[j - 1] - from_depth) / (to_depth - from_depth);
+            points.push(base + dir * (from_new + share * (to_new - from_new)));
+        }
+        points.push(*point);
+        (from_level, from_depth, from_new) = (*to_level, to_depth, *to_new);
+    }
+    Ok(Placed { points, grown, thickness: hits[hits.len() - 1].0 })
+}
+
+/// No wall element may be inverted once the wall follows the surfaces.
+fn check_not_inverted(mesh: &VesselMesh, outer: &WallSurface) -> Result<()> {
+    let Some(e) = mesh.wall_range().find(|&e| !(mesh.quality[e].scaled_jacobian > 0.0)) else { return Ok(()) };
+    let c = crate::mesh::element_centre(&mesh.corners(e));
+    Err(Error::Geometry(format!(
+        "wall surfaces: wall element {} ({}) near {} is inverted (scaled Jacobian {:.3}) once the wall follows {}: \
+         the segmented surfaces turn faster there than the lumen's columns can follow (try wall.growth = \
+         \"ray\", or smooth the surfaces)",
+        e + 1,
+        mesh.regions[e].name(),
+        at(&c),
+        mesh.quality[e].scaled_jacobian,
+        outer.surface.source.display()
+    )))
 }
 
 /// Where the line from a lumen-surface node meets a wall surface, leaving it: distance and point.
@@ -234,7 +254,7 @@ fn hit(surface: &WallSurface, base: &Point3<f64>, dir: &Vector3<f64>, grown: f64
 }
 
 /// The surfaces must be met inside out, each beyond the lumen.
-fn check_order(hits: &[(f64, Point3<f64>)], boundaries: &[(usize, &WallSurface)], base: &Point3<f64>) -> Result<()> {
+fn check_order(hits: &[(f64, Point3<f64>)], boundaries: &Boundaries, base: &Point3<f64>) -> Result<()> {
     for i in 0..hits.len() {
         let before = if i == 0 { 0.0 } else { hits[i - 1].0 };
         if hits[i].0 <= before {
