@@ -78,43 +78,11 @@ pub fn finish(
     let r = &config.refinement;
     if r.before_projection > 1 || r.after_projection > 1 {
         progress.stage("refinement");
-        let coarse_elements = meshed.mesh.hexes.len();
-        let mut radial_cells = config.lumen.radial_elements;
-        let mut projected = crate::refinement::surface_nodes(&meshed.mesh);
-        for (k, placement) in [
-            (r.before_projection, Placement::BeforeProjection(&lumen)),
-            (r.after_projection, Placement::AfterProjection),
-        ] {
-            if k > 1 {
-                refine_meshed(meshed, k, placement, radial_cells)?;
-                radial_cells *= k;
-                if matches!(placement, Placement::BeforeProjection(_)) {
-                    projected = crate::refinement::surface_nodes(&meshed.mesh);
-                }
-            }
-        }
-        meshed.accuracy =
-            crate::accuracy::surface_accuracy(&meshed.mesh, &lumen, &meshed.tree.branches, &meshed.projected)?;
-        additions.refinement = Some(RefinementReport {
-            before_projection: r.before_projection,
-            after_projection: r.after_projection,
-            coarse_elements,
-            elements: meshed.mesh.hexes.len(),
-            surface_nodes: crate::refinement::surface_nodes(&meshed.mesh),
-            projected_points: projected,
-        });
+        additions.refinement = Some(refine_stage(meshed, &lumen, config)?);
     }
     if let Some(outer) = &config.wall.surface {
         progress.stage("wall surfaces");
-        let lumen_elements = meshed.mesh.lumen_range();
-        let inside = crate::mesh::element_centre(&meshed.mesh.corners(lumen_elements.start + lumen_elements.len() / 2));
-        let read = |path: &std::path::Path| -> Result<WallSurface> {
-            let (s, _) = crate::input::read_surface_within(path, config.units, limits)?;
-            WallSurface::new(LumenSurface::new(&s)?, &inside)
-        };
-        let layers = config.wall.surfaces.iter().map(|p| read(p)).collect::<Result<Vec<_>>>()?;
-        let outer = read(outer)?;
-        additions.wall_surfaces = Some(crate::wall_surfaces::place(&mut meshed.mesh, &lumen, &layers, &outer)?);
+        additions.wall_surfaces = Some(wall_stage(meshed, &lumen, outer, config, limits)?);
     }
     if config.extensions.is_on() {
         progress.stage("flow extensions");
@@ -134,6 +102,56 @@ pub fn check_wall_surfaces(config: &MeshConfig) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+/// Refines the mesh before projection, then after, as `config.refinement` asks; re-measures
+/// the surface fidelity.
+fn refine_stage(meshed: &mut Meshed, lumen: &LumenSurface, config: &MeshConfig) -> Result<RefinementReport> {
+    let r = &config.refinement;
+    let coarse_elements = meshed.mesh.hexes.len();
+    let mut radial_cells = config.lumen.radial_elements;
+    // Projected: the coarse mesh's surface nodes, or the mesh's after refinement before projection.
+    let mut projected = crate::refinement::surface_nodes(&meshed.mesh);
+    for (k, placement) in
+        [(r.before_projection, Placement::BeforeProjection(lumen)), (r.after_projection, Placement::AfterProjection)]
+    {
+        if k > 1 {
+            refine_meshed(meshed, k, placement, radial_cells)?;
+            radial_cells *= k;
+            if matches!(placement, Placement::BeforeProjection(_)) {
+                projected = crate::refinement::surface_nodes(&meshed.mesh);
+            }
+        }
+    }
+    meshed.accuracy = crate::accuracy::surface_accuracy(&meshed.mesh, lumen, &meshed.tree.branches, &meshed.projected)?;
+    Ok(RefinementReport {
+        before_projection: r.before_projection,
+        after_projection: r.after_projection,
+        coarse_elements,
+        elements: meshed.mesh.hexes.len(),
+        surface_nodes: crate::refinement::surface_nodes(&meshed.mesh),
+        projected_points: projected,
+    })
+}
+
+/// Reads the segmented wall surfaces (within `limits`) and moves the wall onto them.
+fn wall_stage(
+    meshed: &mut Meshed,
+    lumen: &LumenSurface,
+    outer: &std::path::Path,
+    config: &MeshConfig,
+    limits: &ReadLimits,
+) -> Result<WallSurfacesReport> {
+    // A point of the lumen, which every wall surface must enclose.
+    let lumen_elements = meshed.mesh.lumen_range();
+    let inside = crate::mesh::element_centre(&meshed.mesh.corners(lumen_elements.start + lumen_elements.len() / 2));
+    let read = |path: &std::path::Path| -> Result<WallSurface> {
+        let (s, _) = crate::input::read_surface_within(path, config.units, limits)?;
+        WallSurface::new(LumenSurface::new(&s)?, &inside)
+    };
+    let layers = config.wall.surfaces.iter().map(|p| read(p)).collect::<Result<Vec<_>>>()?;
+    let outer = read(outer)?;
+    crate::wall_surfaces::place(&mut meshed.mesh, lumen, &layers, &outer)
 }
 
 /// Refines the mesh of `meshed` (its junction of each element follows).
