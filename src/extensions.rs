@@ -88,7 +88,10 @@ pub fn extend(mesh: &mut VesselMesh, config: &ExtensionsConfig) -> Result<Vec<Ex
         let first = mesh.hexes.len();
         let (stations, end_centre) = sweep(mesh, end, &section, length, config, &mut wall);
         let elements = first..mesh.hexes.len();
-        if let Some(e) = elements.clone().find(|&e| !(mesh.quality[e].scaled_jacobian > 0.0)) {
+        if let Some(e) = elements.clone().find(|&e| {
+            let sj = mesh.quality[e].scaled_jacobian;
+            sj.is_nan() || sj <= 0.0 // NaN: a degenerate element
+        }) {
             return Err(Error::Geometry(format!(
                 "flow extension of {}: element {} is inverted (scaled Jacobian {:.3}): the end section is not \
                  star-shaped about its centre, so it cannot blend into a circle; use extensions.shape = \"section\" \

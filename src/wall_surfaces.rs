@@ -206,7 +206,12 @@ fn place_column(nodes: &[Point3<f64>], c: &Column, boundaries: &Boundaries, lume
 
 /// No wall element may be inverted once the wall follows the surfaces.
 fn check_not_inverted(mesh: &VesselMesh, outer: &WallSurface) -> Result<()> {
-    let Some(e) = mesh.wall_range().find(|&e| !(mesh.quality[e].scaled_jacobian > 0.0)) else { return Ok(()) };
+    let Some(e) = mesh.wall_range().find(|&e| {
+        let sj = mesh.quality[e].scaled_jacobian;
+        sj.is_nan() || sj <= 0.0 // NaN: a degenerate element
+    }) else {
+        return Ok(());
+    };
     let c = crate::mesh::element_centre(&mesh.corners(e));
     Err(Error::Geometry(format!(
         "wall surfaces: wall element {} ({}) near {} is inverted (scaled Jacobian {:.3}) once the wall follows {}: \

@@ -348,3 +348,28 @@ fn check_mesh(case: &Path) {
     let failed: Vec<&str> = log.lines().filter(|l| l.trim_start().starts_with("***")).collect();
     assert!(failed.is_empty() && log.lines().any(|l| l.trim() == "Mesh OK."), "{}:\n{log}", case.display());
 }
+
+/// An end the vessel does not have, or a length out of range, is a one-line error naming the key.
+#[test]
+fn unknown_ends_and_bad_lengths_are_clear_errors() {
+    let (stl, csv) = fixture("straight");
+    let dir = temp_dir("ext-errors");
+    for (case, words) in [
+        (
+            "[extensions]\nends = [\"outlet_9\"]\n",
+            "extensions.ends: the mesh has no end named 'outlet_9'; its ends are inlet, outlet",
+        ),
+        ("[extensions]\nends = \"all\"\noutlet_length = -1.0\n", "extensions.outlet_length"),
+        ("[extensions]\nends = \"some\"\n", "extensions.ends"),
+    ] {
+        let file = dir.join("case.toml");
+        std::fs::write(&file, case).unwrap();
+        let out = dir.join("out");
+        let args = ["mesh", "--surface", path_str(&stl), "--centerlines", path_str(&csv), "--output", path_str(&out)];
+        let o = common::vesselhex(&[&args[..], &["--quiet", "--config", path_str(&file)]].concat());
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && stderr.lines().count() == 1 && stderr.contains(words), "{case}: {stderr}");
+        assert!(!out.join("report.json").exists());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

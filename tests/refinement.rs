@@ -165,3 +165,25 @@ fn refinement_counts_in_report_json_and_bars_on_a_curved_vessel() {
         let _ = std::fs::remove_dir_all(&out);
     }
 }
+
+/// Refinement beyond the limit (8 splits per direction, both together) or of 0 is refused.
+#[test]
+fn refinement_out_of_range_is_a_clear_error() {
+    let (stl, csv) = fixture("straight");
+    let dir = temp_dir("refine-errors");
+    for (case, words) in [
+        ("[refinement]\nbefore_projection = 0\n", "refinement.before_projection: 0 must be between 1"),
+        ("[refinement]\nbefore_projection = 3\nafter_projection = 3\n", "3 x 3 = 9 splits per direction"),
+    ] {
+        let file = dir.join("case.toml");
+        std::fs::write(&file, case).unwrap();
+        let out = dir.join("out");
+        let args = ["mesh", "--surface", stl.to_str().unwrap(), "--centerlines", csv.to_str().unwrap()];
+        let o = common::vesselhex(
+            &[&args[..], &["--output", out.to_str().unwrap(), "--quiet", "--config", file.to_str().unwrap()]].concat(),
+        );
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && stderr.lines().count() == 1 && stderr.contains(words), "{case}: {stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
