@@ -139,7 +139,7 @@ fn cell_zone_size(text: &str, name: &str) -> Option<usize> {
 }
 
 /// The FE decks are the same bytes with extensions as without (they model the vessel alone);
-/// the VTU holds the extensions as `region` 4.
+/// the VTU holds the extensions as `region` 4; one thread writes the same files.
 #[test]
 fn fe_decks_are_unchanged_by_extensions() {
     let dir = common::fixtures_dir();
@@ -153,6 +153,14 @@ fn fe_decks_are_unchanged_by_extensions() {
     args.extend(formats);
     let report = mesh_cli(&stl, &vtp, &out.join("extended"), &args);
     assert_eq!(report["extensions"].as_array().map(Vec::len), Some(3));
+    // Determinism: one thread writes the same files.
+    args.extend(["--threads", "1"]);
+    mesh_cli(&stl, &vtp, &out.join("one-thread"), &args);
+    for path in files_under(&out.join("extended")).iter().filter(|p| !p.ends_with("report.json")) {
+        let rel = path.strip_prefix(out.join("extended")).unwrap();
+        let one = std::fs::read(out.join("one-thread").join(rel)).unwrap();
+        assert!(std::fs::read(path).unwrap() == one, "{} differs with one thread", rel.display());
+    }
     for deck in ["calculix", "abaqus", "febio"] {
         for path in files_under(&out.join("plain").join(deck)) {
             let rel = path.strip_prefix(out.join("plain")).unwrap();
