@@ -44,7 +44,7 @@ pub fn annotate(mesh: &mut VesselMesh) {
         |(e, ((triad, fibre), q))| {
             let c = m.corners(e);
             *triad = element_triad(&c);
-            if let (true, Some(b)) = (m.regions[e].is_wall(), betas[m.regions[e] as usize]) {
+            if let (true, Some(&Some(b))) = (m.regions[e].is_wall(), betas.get(m.regions[e] as usize)) {
                 *fibre = fibre_directions(triad, b);
             }
             *q = element_quality(&c);

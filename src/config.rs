@@ -164,6 +164,15 @@ pub struct WallConfig {
     pub intima: LayerConfig,
     pub media: LayerConfig,
     pub adventitia: LayerConfig,
+    /// The segmented outer wall surface (`--wall-surface`; a case file's path is relative to
+    /// its folder): the wall then runs from the lumen to it along each node's growth direction,
+    /// its thickness as segmented (see [`crate::wall_surfaces`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surface: Option<std::path::PathBuf>,
+    /// Segmented surfaces between the layers, from the inside out (intima|media, then
+    /// media|adventitia); they need `surface`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub surfaces: Vec<std::path::PathBuf>,
 }
 
 impl Default for WallConfig {
@@ -175,6 +184,8 @@ impl Default for WallConfig {
             intima: LayerConfig { fraction: 0.27, elements: 1, fibre_angle_deg: 29.0 },
             media: LayerConfig { fraction: 0.36, elements: 1, fibre_angle_deg: 29.0 },
             adventitia: LayerConfig { fraction: 0.37, elements: 1, fibre_angle_deg: 62.0 },
+            surface: None,
+            surfaces: Vec::new(),
         }
     }
 }
@@ -192,6 +203,186 @@ impl WallConfig {
                 fibre_angle_deg: l.fibre_angle_deg,
             })
             .collect()
+    }
+}
+
+/// The shape of a flow extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ExtensionShape {
+    /// The end's own section blended over `blend_length` into a circle of the end's mean
+    /// (area-equivalent) radius, then a cylinder: the inlet and outlets are circular.
+    #[default]
+    Cylinder,
+    /// The end's own section, unchanged all along.
+    Section,
+}
+
+/// The vessel ends a flow extension is added to: `"all"`, or a list of end names.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ExtendedEnds {
+    /// `"all"` (or `"none"`).
+    Keyword(String),
+    /// End names as in the mesh: `inlet`, `outlet`, `outlet_1`, ...
+    Names(Vec<String>),
+}
+
+impl Default for ExtendedEnds {
+    fn default() -> Self {
+        ExtendedEnds::Names(Vec::new())
+    }
+}
+
+/// Flow extensions (section `[extensions]`, see [`crate::extensions`]): every chosen vessel end
+/// is extended along its axis so that the flow develops before it leaves and the inlet and
+/// outlets are circular; the extensions' fluid is region `extension`, without a wall.
+///
+/// Defaults: 5 radii at the inlet and 10 at the outlets. vesselhex's inflow is already
+/// developed (parabolic), so the inlet's extension only has to carry it onto the vessel's own
+/// section; at an outlet the extension keeps the zero-gradient outflow condition away from the
+/// disturbed flow leaving a bend, a bulge or a junction, which settles over about 0.05 Re
+/// diameters (Re = 100-200 at the default inflow: 10-20 radii).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExtensionsConfig {
+    /// `"all"`, or the names of the ends to extend; none by default.
+    pub ends: ExtendedEnds,
+    /// Length of the inlet's extension, relative to the end's mean radius.
+    pub inlet_length: f64,
+    /// Length of each outlet's extension, relative to the end's mean radius.
+    pub outlet_length: f64,
+    /// Per-end lengths (relative), overriding the two above: `[extensions.length] outlet_2 = 8`.
+    pub length: indexmap::IndexMap<String, f64>,
+    pub shape: ExtensionShape,
+    /// Length over which the end's section blends into the circle, relative to the mean radius.
+    pub blend_length: f64,
+    /// Whether the FE decks holding fluid (FEBio's fluid-FSI deck) take the extensions too, as
+    /// rigid-walled fluid; by default they model the vessel alone.
+    pub fe_decks: bool,
+}
+
+impl Default for ExtensionsConfig {
+    fn default() -> Self {
+        ExtensionsConfig {
+            ends: ExtendedEnds::default(),
+            inlet_length: 5.0,
+            outlet_length: 10.0,
+            length: indexmap::IndexMap::new(),
+            shape: ExtensionShape::Cylinder,
+            blend_length: 2.0,
+            fe_decks: false,
+        }
+    }
+}
+
+/// Longest flow extension, in radii.
+const MAX_EXTENSION_RADII: f64 = 1000.0;
+
+impl ExtensionsConfig {
+    /// Whether any end is extended.
+    pub fn is_on(&self) -> bool {
+        match &self.ends {
+            ExtendedEnds::Keyword(k) => k == "all",
+            ExtendedEnds::Names(n) => !n.is_empty(),
+        }
+    }
+    /// Whether the section is left out of report.json's configuration (as it is by default).
+    fn is_default(&self) -> bool {
+        *self == ExtensionsConfig::default()
+    }
+    /// Whether the end named `end` is extended.
+    pub fn extends(&self, end: &str) -> bool {
+        match &self.ends {
+            ExtendedEnds::Keyword(k) => k == "all",
+            ExtendedEnds::Names(n) => n.iter().any(|x| x == end),
+        }
+    }
+    /// The length of an end's extension, relative to its radius.
+    pub fn length_of(&self, end: &str, is_inlet: bool) -> f64 {
+        self.length.get(end).copied().unwrap_or(if is_inlet { self.inlet_length } else { self.outlet_length })
+    }
+    pub fn validate(&self) -> Result<()> {
+        let bad = |key: &str, why: String| Err(Error::Config(format!("extensions.{key}: {why}")));
+        if let ExtendedEnds::Keyword(k) = &self.ends {
+            if k != "all" && k != "none" {
+                return bad("ends", format!("\"{k}\" is neither \"all\", \"none\" nor a list of end names"));
+            }
+        }
+        let lengths =
+            [("inlet_length".to_string(), self.inlet_length), ("outlet_length".to_string(), self.outlet_length)]
+                .into_iter()
+                .chain(self.length.iter().map(|(end, l)| (format!("length.{end}"), *l)));
+        for (key, l) in lengths {
+            if !(l > 0.0 && l <= MAX_EXTENSION_RADII) {
+                return bad(
+                    &key,
+                    format!("{l} must be between 0 and {MAX_EXTENSION_RADII} (relative to the end's radius)"),
+                );
+            }
+            if self.shape == ExtensionShape::Cylinder && self.blend_length > l {
+                return bad(
+                    "blend_length",
+                    format!("{} is longer than {key} = {l}: the section would not reach the circle", self.blend_length),
+                );
+            }
+        }
+        if !(0.0..=MAX_EXTENSION_RADII).contains(&self.blend_length) {
+            return bad(
+                "blend_length",
+                format!("must be between 0 and {MAX_EXTENSION_RADII} (relative to the radius)"),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Refinement of the whole mesh (section `[refinement]`, see [`crate::refinement`]): every hex
+/// split k-fold in each direction, before projection (every new lumen-surface node cast onto the
+/// triangles: the mesh follows the triangles, facets and all) or after it (new nodes on a smooth
+/// surface through the projected ones: the smooth shape is kept with few projected points). De
+/// Santis et al. 2011, Appendix A.2.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RefinementConfig {
+    /// Splits per direction before projection (1: none).
+    pub before_projection: usize,
+    /// Splits per direction after projection (1: none).
+    pub after_projection: usize,
+}
+
+impl Default for RefinementConfig {
+    fn default() -> Self {
+        RefinementConfig { before_projection: 1, after_projection: 1 }
+    }
+}
+
+/// Most splits per direction, both refinements together (each multiplies the elements by k^3).
+const MAX_REFINEMENT: usize = 8;
+
+impl RefinementConfig {
+    fn is_default(&self) -> bool {
+        *self == RefinementConfig::default()
+    }
+    pub fn validate(&self) -> Result<()> {
+        for (key, k) in [("before_projection", self.before_projection), ("after_projection", self.after_projection)] {
+            if !(1..=MAX_REFINEMENT).contains(&k) {
+                return Err(Error::Config(format!(
+                    "refinement.{key}: {k} must be between 1 (no refinement) and {MAX_REFINEMENT}"
+                )));
+            }
+        }
+        let total = self.before_projection * self.after_projection;
+        if total > MAX_REFINEMENT {
+            return Err(Error::Config(format!(
+                "refinement.after_projection: {} x {} = {total} splits per direction (elements x {}); at most \
+                 {MAX_REFINEMENT} together",
+                self.before_projection,
+                self.after_projection,
+                total.pow(3)
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -305,6 +496,12 @@ pub struct MeshConfig {
     /// Per-layer wall constants of every FE deck (`[material]`).
     #[serde(default)]
     pub material: crate::writers::material::WallMaterial,
+    /// Flow extensions at the vessel's ends (`[extensions]`; none by default).
+    #[serde(default, skip_serializing_if = "ExtensionsConfig::is_default")]
+    pub extensions: ExtensionsConfig,
+    /// Refinement before or after projection (`[refinement]`; none by default).
+    #[serde(default, skip_serializing_if = "RefinementConfig::is_default")]
+    pub refinement: RefinementConfig,
 }
 
 impl Default for MeshConfig {
@@ -328,6 +525,8 @@ impl MeshConfig {
             febio: Default::default(),
             fe: Default::default(),
             material: Default::default(),
+            extensions: Default::default(),
+            refinement: Default::default(),
         };
         match preset {
             Preset::Coarse => {}
@@ -410,6 +609,14 @@ impl MeshConfig {
             })?),
             None => None,
         };
+        let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let relative_to_case = |p: &mut std::path::PathBuf| {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        };
+        config.wall.surface.iter_mut().for_each(relative_to_case);
+        config.wall.surfaces.iter_mut().for_each(relative_to_case);
         config.validate().map_err(|e| match e {
             Error::Config(message) => {
                 // Messages start with the key: "lumen.core_elements: ...", "febio.element = ...".
@@ -529,6 +736,16 @@ impl MeshConfig {
             }
         }
         self.material.validate()?;
+        self.extensions.validate()?;
+        self.refinement.validate()?;
+        // That they need the outer wall's surface is checked when the run starts
+        // (finishing::check_wall_surfaces): --wall-surface comes after the case file.
+        if !w.surfaces.is_empty() && w.surfaces.len() != 2 {
+            return bad(
+                "wall.surfaces",
+                "must list the two surfaces between the layers, inside out: intima|media, then media|adventitia",
+            );
+        }
         if let Some(dir) = &self.fe.template_dir {
             crate::writers::template::check_template_dir(dir)?;
         }

@@ -4,7 +4,9 @@
 //! Data flows one way, one stage a module:
 //! [`input`] -> [`centerline`] -> [`blocks`] -> [`projection`] (over [`surface`]) -> [`volume`]
 //! -> [`annotate`] ([`quality`], [`accuracy`]) -> [`writers`] and [`report`]; [`pipeline`] runs
-//! them in order.
+//! them in order. [`finishing`] adds, when asked, refinement before or after projection
+//! ([`refinement`]), walls from segmented surfaces ([`wall_surfaces`]) and flow extensions
+//! ([`extensions`]) to the annotated mesh.
 pub mod accuracy;
 pub mod annotate;
 pub mod blocks;
@@ -12,6 +14,8 @@ pub mod centerline;
 pub mod centerline_extract;
 pub mod config;
 pub mod error;
+pub mod extensions;
+pub mod finishing;
 pub mod input;
 pub mod junction;
 pub mod mesh;
@@ -20,6 +24,7 @@ pub mod pipeline;
 pub mod progress;
 pub mod projection;
 pub mod quality;
+pub mod refinement;
 pub mod report;
 pub mod resources;
 pub mod surface;
@@ -28,6 +33,7 @@ pub mod synthetic_branching;
 pub mod testing;
 pub mod units;
 pub mod volume;
+pub mod wall_surfaces;
 pub mod writers;
 
 pub use error::{Error, Result};

@@ -46,8 +46,10 @@ Parameters come from the preset, then the case file (--config, TOML), then these
                junction_merge_radii, inlet_mm
   [lumen] core_elements, core_size, radial_elements, growth_ratio, first_cell_height, axial_spacing,
           axial_spacing_mm, ray_reach
-  [wall] thickness_ratio, thickness_mm, growth; [wall.intima] / [wall.media] / [wall.adventitia]:
-          fraction, elements, fibre_angle_deg
+  [wall] thickness_ratio, thickness_mm, growth, surface, surfaces; [wall.intima] / [wall.media] /
+          [wall.adventitia]: fraction, elements, fibre_angle_deg
+  [extensions] ends, inlet_length, outlet_length, [extensions.length], shape, blend_length, fe_decks
+  [refinement] before_projection, after_projection
   [openfoam] mean_velocity, flow_rate_ml_s, profile, solver, nu, iterations, end_time, binary
   [fe] abaqus_element, calculix_element, material, template_dir, pressure_mmhg
   [febio] element, lumen_pressure_mmhg, static_steps, [febio.blood], [febio.fsi]
@@ -118,9 +120,14 @@ struct MeshArgs {
     /// x,y,z (the end nearest this point, in --units).
     #[arg(long, default_value = "auto")]
     inlet: String,
-    /// Without --centerlines: extra end points x,y,z (in --units), for rounded caps.
+    /// Without --centerlines: points x,y,z (in --units) near ends, overriding those found (every
+    /// end, rounded caps included, is found without them).
     #[arg(long, num_args = 1..)]
     ends: Vec<String>,
+    /// The segmented outer wall surface (STL, VTP or VTK, in --units): the wall runs from the
+    /// lumen to it, its thickness as segmented (also wall.surface in the case file).
+    #[arg(long, value_name = "FILE")]
+    wall_surface: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -134,7 +141,8 @@ struct CenterlinesArgs {
     /// The inlet: auto (the largest end) or x,y,z (the end nearest this point).
     #[arg(long, default_value = "auto")]
     inlet: String,
-    /// A point near an end that has no boundary loop or flat cap (rounded caps): x,y,z, repeatable.
+    /// A point near an end, overriding the end found there (every end, rounded caps included, is
+    /// found without it): x,y,z, repeatable.
     #[arg(long, num_args = 1..)]
     ends: Vec<String>,
     /// Output file (.vtp).
@@ -262,6 +270,9 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
     }
     if let Some(f) = &args.foam_format {
         config.openfoam.binary = f == "binary";
+    }
+    if let Some(path) = args.wall_surface {
+        config.wall.surface = Some(path);
     }
     let mut warnings = vec![];
     if let Some(n) = args.threads {

@@ -71,6 +71,10 @@ pub fn face_nodes(hex: &Hex, f: usize) -> [u32; 4] {
 }
 
 /// What a hexahedron belongs to.
+///
+/// Elements are ordered by region in this order (the derived order), so each region's elements
+/// are contiguous: a flow extension's come last, after the wall, so that the vessel's own nodes
+/// and elements keep their numbers whether or not it is extended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, PartialOrd, Ord)]
 #[serde(rename_all = "lowercase")]
 pub enum Region {
@@ -78,9 +82,13 @@ pub enum Region {
     Intima = 1,
     Media = 2,
     Adventitia = 3,
+    /// Fluid of an artificial flow extension beyond a vessel end (see [`crate::extensions`]): no
+    /// wall grows around it.
+    Extension = 4,
 }
 
 impl Region {
+    /// The vessel's own regions (a flow extension is not one of them).
     pub const ALL: [Region; 4] = [Region::Lumen, Region::Intima, Region::Media, Region::Adventitia];
     pub const WALL: [Region; 3] = [Region::Intima, Region::Media, Region::Adventitia];
     pub fn name(self) -> &'static str {
@@ -89,6 +97,7 @@ impl Region {
             Region::Intima => "intima",
             Region::Media => "media",
             Region::Adventitia => "adventitia",
+            Region::Extension => "extension",
         }
     }
     /// The integer written to the `region` cell array.
@@ -96,7 +105,7 @@ impl Region {
         self as i32
     }
     pub fn is_wall(self) -> bool {
-        self != Region::Lumen
+        matches!(self, Region::Intima | Region::Media | Region::Adventitia)
     }
 }
 
@@ -167,6 +176,15 @@ pub mod sets {
     pub fn wall_end(end: &str) -> String {
         format!("wall_{end}")
     }
+    /// Flow-extension faces (and nodes) on the extension's rigid wall.
+    pub const EXTENSION_WALL: &str = "extension_wall";
+    /// A flow extension's elements.
+    pub const EXTENSION: &str = "extension";
+    /// Where the vessel meets the flow extension of an end: the lumen nodes of the vessel's own
+    /// end section and the faces of its lumen elements there (internal to the fluid).
+    pub fn cut(end: &str) -> String {
+        format!("cut_{end}")
+    }
 }
 
 /// The volume mesh of lumen and wall with everything a writer needs.
@@ -213,6 +231,20 @@ impl VesselMesh {
     }
     pub fn lumen_range(&self) -> std::ops::Range<usize> {
         self.region_range(Region::Lumen)
+    }
+    /// The flow extensions' elements (empty without extensions).
+    pub fn extension_range(&self) -> std::ops::Range<usize> {
+        self.region_range(Region::Extension)
+    }
+    /// Sorted nodes of the fluid: the lumen's and the flow extensions'.
+    pub fn fluid_nodes(&self) -> Vec<u32> {
+        let mut nodes = self.nodes_of(self.lumen_range());
+        if !self.extension_range().is_empty() {
+            nodes.extend(self.nodes_of(self.extension_range()));
+            nodes.sort_unstable();
+            nodes.dedup();
+        }
+        nodes
     }
     /// Corner coordinates of element `e`.
     pub fn corners(&self, e: usize) -> [Point3<f64>; 8] {

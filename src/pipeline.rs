@@ -798,9 +798,10 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
         .flatten()
         .map(PathBuf::as_path)
         .collect();
+    crate::finishing::check_wall_surfaces(config)?;
     let output = claim_output(&request.output, &inputs, config, request.force)?;
     let limits = ReadLimits::within(request.max_memory);
-    let mut progress = Progress::new(request.quiet, 9);
+    let mut progress = Progress::new(request.quiet, 9 + crate::finishing::stages(config));
     progress.stage("reading");
     let (surface, _) = read_surface_within(&request.surface, config.units, &limits)?;
     let centerline_units = request.centerline_units.unwrap_or(config.units);
@@ -1040,6 +1041,7 @@ fn build_report(
         wall: wall_report(mesh),
         surface_accuracy: meshed.accuracy.clone(),
         ends: vec![],
+        additions: Default::default(),
         branches,
         junctions,
         within_bars,
@@ -1087,6 +1089,8 @@ pub struct MeshedVessel {
     pub inlet: usize,
     /// What surface hygiene changed.
     pub hygiene: HygieneReport,
+    /// Refinement, segmented walls and flow extensions done after meshing (millimetres).
+    pub additions: crate::finishing::Additions,
     pub settings: MeshSettings,
 }
 
@@ -1101,6 +1105,7 @@ pub fn mesh_surface(
 ) -> Result<MeshedVessel> {
     let config = &settings.config;
     config.validate()?;
+    crate::finishing::check_wall_surfaces(config)?;
     settings.warnings.extend(config.warnings());
     let (surface, hygiene) = clean_surface(surface)?;
     settings.warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
@@ -1120,16 +1125,24 @@ pub fn mesh_surface(
     let radius = crate::resources::median_radius(&centerlines, &surface);
     check_lengths_against_radius(config, radius)?;
     settings.warnings.extend(unit_warning(radius, config.units, settings.centerline_units));
-    let estimate = crate::resources::estimate_mesh(&centerlines, radius, config, surface.triangles.len());
+    let mut estimate = crate::resources::estimate_mesh(&centerlines, radius, config, surface.triangles.len());
+    crate::finishing::scale_estimate(&mut estimate, config);
     crate::resources::check_fits(&estimate, settings.max_memory, &centerline_source)?;
-    let meshed = mesh_vessel(&surface, &centerlines, config, progress).map_err(|e| name_winding(e, &surface))?;
-    Ok(MeshedVessel { meshed, surface, centerline_source, centerlines, ends, inlet, hygiene, settings })
+    let mut meshed = mesh_vessel(&surface, &centerlines, config, progress).map_err(|e| name_winding(e, &surface))?;
+    let limits = ReadLimits::within(settings.max_memory);
+    let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress)?;
+    Ok(MeshedVessel { meshed, surface, centerline_source, centerlines, ends, inlet, hygiene, additions, settings })
 }
 
 /// Claims the output folder for writing `config`'s formats: `inputs` (and the case file's
 /// template folder) must not lie in it (see [`OutputFolder::claim`]).
 pub fn claim_output(output: &Path, inputs: &[&Path], config: &MeshConfig, force: bool) -> Result<OutputFolder> {
-    let inputs: Vec<&Path> = inputs.iter().copied().chain(config.fe.template_dir.as_deref()).collect();
+    let inputs: Vec<&Path> = inputs
+        .iter()
+        .copied()
+        .chain(config.fe.template_dir.as_deref())
+        .chain(config.wall.surface.iter().chain(&config.wall.surfaces).map(PathBuf::as_path))
+        .collect();
     OutputFolder::claim(output, &inputs, force)
 }
 
@@ -1152,7 +1165,8 @@ pub fn write_vessel(
     let mut outputs = Vec::new();
     for f in &formats {
         let write = writers::writer(f).expect("checked above");
-        outputs.extend(write(&vessel.meshed.mesh, &options, output.staging())?);
+        let mesh = crate::finishing::mesh_for_format(&vessel.meshed.mesh, f, config);
+        outputs.extend(write(&mesh, &options, output.staging())?);
     }
     progress.finish();
     let mut report = vessel_report(vessel, config, &progress.timings);
@@ -1178,6 +1192,7 @@ pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(Str
     let mut report = build_report(&vessel.meshed, &vessel.surface, &vessel.centerline_source, config, timings, warnings);
     report.ends = ends;
     report.input.hygiene = vessel.hygiene.clone();
+    report.additions = vessel.additions.clone().scaled(config.output_units.from_mm());
     report
 }
 

@@ -116,6 +116,9 @@ pub struct Report {
     pub surface_accuracy: SurfaceAccuracy,
     /// Every vessel end, meshed or not (a vessel is never dropped in silence).
     pub ends: Vec<EndReport>,
+    /// Refinement, segmented walls and flow extensions, when asked for (nothing otherwise).
+    #[serde(flatten)]
+    pub additions: crate::finishing::Additions,
     pub branches: Vec<BranchReport>,
     pub junctions: Vec<JunctionReport>,
     /// Whether the mesh meets every quality bar ([`Bars`]); when not, `warnings` names the bar

@@ -887,8 +887,14 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
     xml.open("Mesh", &[]);
     let all: Vec<u32> = (0..mesh.nodes.len() as u32).collect();
     nodes(xml, mesh, "all_nodes", &all, None, u);
-    for region in Region::ALL {
+    // Flow extensions (when the deck is given them, `extensions.fe_decks`): rigid-walled fluid.
+    let extended = !mesh.extension_range().is_empty();
+    for region in Region::ALL.into_iter().chain(extended.then_some(Region::Extension)) {
         elements(xml, mesh, region, None);
+    }
+    let extension_wall: &[u32] = if extended { node_set_of(mesh, sets::EXTENSION_WALL)? } else { &[] };
+    if extended {
+        node_set(xml, mesh, None, sets::EXTENSION_WALL, extension_wall);
     }
     let mut lumen_inner_sets = Vec::new();
     for end in &mesh.ends {
@@ -913,6 +919,9 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
 
     let mut domains: Vec<(&str, &str)> = vec![(Region::Lumen.name(), "blood")];
     domains.extend(Region::WALL.iter().map(|r| (r.name(), r.name())));
+    if extended {
+        domains.push((Region::Extension.name(), "blood"));
+    }
     mesh_domains(xml, &domains);
     mat_axes(xml, mesh);
 
@@ -923,11 +932,18 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
     for (end, set) in &lumen_inner_sets {
         zero_displacement(xml, &format!("fix_lumen_{end}"), set, [true; 3]);
     }
-    xml.open("bc", &[("name", "no_slip"), ("node_set", sets::INTERFACE_NODES), ("type", "zero fluid velocity")]);
-    for tag in ["wx_dof", "wy_dof", "wz_dof"] {
-        xml.leaf(tag, &[], "1");
+    let mut no_slip = vec![("no_slip", sets::INTERFACE_NODES)];
+    if extended {
+        zero_displacement(xml, "fix_extension_wall", sets::EXTENSION_WALL, [true; 3]);
+        no_slip.push(("no_slip_extension", sets::EXTENSION_WALL));
     }
-    xml.close("bc");
+    for (name, set) in no_slip {
+        xml.open("bc", &[("name", name), ("node_set", set), ("type", "zero fluid velocity")]);
+        for tag in ["wx_dof", "wy_dof", "wz_dof"] {
+            xml.leaf(tag, &[], "1");
+        }
+        xml.close("bc");
+    }
     for end in &outlets {
         let surf = sets::lumen_end(&end.name);
         xml.open("bc", &[("name", &format!("pressure_{}", end.name)), ("surface", &surf), ("type", "fluid pressure")]);

@@ -51,7 +51,9 @@
 //! end time `openfoam.end_time` or 100 windows.
 
 use super::inp::{fmt_const, Dialect, EndHold, ModelData};
-use super::openfoam::{end_vars, inlet_velocities, lumen_polymesh, render, slab_axis, EndNames, PolyMesh};
+use super::openfoam::{
+    end_vars, extension_wall_vars, inlet_velocities, lumen_polymesh, render, slab_axis, EndNames, PolyMesh,
+};
 use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::config::InletProfile;
@@ -130,7 +132,7 @@ fn sorted4(mut q: [u32; 4]) -> [u32; 4] {
 /// mesh's interface node set).
 pub fn interface_map(mesh: &VesselMesh, poly: &PolyMesh) -> Result<InterfaceMap> {
     let fail = |m: String| Error::Geometry(format!("FSI map: {m}"));
-    let lumen_nodes = mesh.nodes_of(mesh.lumen_range());
+    let lumen_nodes = mesh.fluid_nodes();
     let patch = poly.patch(FLUID_PATCH).ok_or_else(|| fail("the fluid mesh has no 'wall' patch".into()))?;
     let lumen_faces = mesh
         .face_sets
@@ -322,6 +324,7 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     let windows = (end / dt).round().max(1.0) as u64;
     let (_, slabs) = slab_axis(&poly);
     let mut vars: Vec<(&str, String)> = end_vars(&ends)?;
+    vars.extend(extension_wall_vars(&poly));
     vars.extend([
         ("slabs_np", slabs("$np")),
         ("version", env!("CARGO_PKG_VERSION").to_string()),

@@ -509,16 +509,35 @@ fn end_patches<'a>(mesh: &'a VesselMesh, ends: &EndNames) -> Result<Vec<PatchSpe
     Ok(specs)
 }
 
-/// The polyMesh of the lumen: patches inlet, outlets, wall; cellZone lumen.
+/// The polyMesh of the fluid: patches inlet, outlets, wall; cellZone lumen. With flow
+/// extensions (see [`crate::extensions`]), their cells follow the lumen's, in cellZone
+/// `extension`, their rigid wall is the patch `extension_wall` (before `wall`) and the end
+/// patches lie at the extended ends.
 pub fn lumen_polymesh(mesh: &VesselMesh) -> Result<PolyMesh> {
+    let fluid = crate::extensions::fluid_view(mesh);
+    let mesh = &*fluid;
     let mut specs = end_patches(mesh, &EndNames::of(mesh)?)?;
+    specs.extend(extension_wall_patch(mesh));
     specs.push(PatchSpec {
         name: "wall".into(),
         kind: PatchKind::Wall,
         faces: face_set(mesh, sets::LUMEN_WALL_FACES)?,
     });
-    let lumen = mesh.lumen_range();
-    build(mesh, lumen.clone(), &specs, None, &[(Region::Lumen.name().to_string(), lumen)])
+    let (lumen, extension) = (mesh.lumen_range(), mesh.extension_range());
+    let zones =
+        [(Region::Lumen.name().to_string(), lumen.clone()), (Region::Extension.name().to_string(), extension.clone())];
+    // The lumen then the extensions (after them in this view), whose range is empty without any.
+    let end = if extension.is_empty() { lumen.end } else { extension.end };
+    build(mesh, lumen.start..end, &specs, None, &zones)
+}
+
+/// The flow extensions' rigid wall, when the mesh has extensions.
+fn extension_wall_patch(mesh: &VesselMesh) -> Option<PatchSpec<'_>> {
+    mesh.face_sets.get(sets::EXTENSION_WALL).map(|faces| PatchSpec {
+        name: sets::EXTENSION_WALL.into(),
+        kind: PatchKind::Wall,
+        faces,
+    })
 }
 
 /// The polyMesh of lumen and wall: patches inlet, outlets, wall end rings, outer wall; cellZones
@@ -535,8 +554,9 @@ pub fn fsi_polymesh(mesh: &VesselMesh) -> Result<PolyMesh> {
         kind: PatchKind::Patch,
         faces: face_set(mesh, sets::WALL_OUTER_FACES)?,
     });
+    specs.extend(extension_wall_patch(mesh));
     let zones: Vec<(String, Range<usize>)> =
-        Region::ALL.iter().map(|r| (r.name().to_string(), mesh.region_range(*r))).collect();
+        Region::ALL.iter().chain([&Region::Extension]).map(|r| (r.name().to_string(), mesh.region_range(*r))).collect();
     if mesh.wall_range().is_empty() {
         return Err(Error::Geometry("OpenFOAM writer (openfoam-fsi): the mesh has no wall elements".into()));
     }
@@ -750,6 +770,24 @@ pub fn end_vars(ends: &EndNames) -> Result<Vec<(&'static str, String)>> {
 
 pub use super::template::render;
 
+/// The field entries of the flow extensions' wall patch (`extension_wall_U`, `extension_wall_p`,
+/// `extension_wall_displacement` of the FSI overlay): empty without extensions.
+pub fn extension_wall_vars(poly: &PolyMesh) -> Vec<(&'static str, String)> {
+    EXTENSION_WALL_PIECES
+        .iter()
+        .map(|(key, piece)| {
+            (*key, if poly.patch(sets::EXTENSION_WALL).is_some() { piece.to_string() } else { String::new() })
+        })
+        .collect()
+}
+
+/// The flow extensions' wall entries of the field files: placeholder and text.
+const EXTENSION_WALL_PIECES: &[(&str, &str)] = &[
+    ("extension_wall_U", include_str!("../../templates/openfoam/0/U.extension_wall")),
+    ("extension_wall_p", include_str!("../../templates/openfoam/0/p.extension_wall")),
+    ("extension_wall_displacement", include_str!("../../templates/fsi/openfoam/0/pointDisplacement.extension_wall")),
+];
+
 /// The inflow written to `0/U`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Inflow {
@@ -889,6 +927,7 @@ fn case_vars(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Resul
     };
     let (axis, slabs) = slab_axis(poly);
     let mut vars = end_vars(ends)?;
+    vars.extend(extension_wall_vars(poly));
     vars.extend([
         ("slab_axis", axis.to_string()),
         ("slabs_2", slabs("2")),
@@ -957,11 +996,9 @@ pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path)
         out.push(write_text(&case, rel, &render(rel, text, &vars)?, false)?);
     }
     out.push(write_text(&case, "Allrun", &render("openfoam-fsi/Allrun", FSI_ALLRUN, &vars)?, true)?);
-    let n_lumen = mesh.count(Region::Lumen) as u32;
-    let zones = vec![
-        ("fluid".to_string(), (0..n_lumen).collect::<Vec<u32>>()),
-        ("solid".to_string(), (n_lumen..poly.n_cells as u32).collect()),
-    ];
+    let cells = |r: Range<usize>| r.start as u32..r.end as u32;
+    let fluid: Vec<u32> = cells(mesh.lumen_range()).chain(cells(mesh.extension_range())).collect();
+    let zones = vec![("fluid".to_string(), fluid), ("solid".to_string(), cells(mesh.wall_range()).collect())];
     // splitMeshRegions -cellZonesFileOnly reads the file from constant/polyMesh.
     let path = case.join("constant/polyMesh/fluidSolidZones");
     write_atomic(&path, |w| write_cell_zones(w, "constant/polyMesh", "fluidSolidZones", &zones))?;
