@@ -5,13 +5,13 @@ use crate::accuracy::{surface_accuracy, SurfaceAccuracy};
 use crate::annotate::annotate;
 use crate::blocks::{graded_levels, growth_ratio_for_first_cell, SectionTemplate};
 use crate::centerline::{Branch, CenterlineSample};
-use crate::centerline_extract::{EndKind, VesselEnd};
-use crate::units::LengthUnit;
 use crate::centerline::{CenterlineTree, ForcedMerge};
+use crate::centerline_extract::{EndKind, VesselEnd};
 use crate::config::{MeshConfig, WallGrowth};
 use crate::error::{Error, Result};
 use crate::input::{
-    clean_surface, read_centerlines_within, read_surface_within, Centerlines, HygieneReport, ReadLimits, TriangleSurface,
+    clean_surface, read_centerlines_within, read_surface_within, Centerlines, HygieneReport, ReadLimits,
+    TriangleSurface,
 };
 use crate::junction::{
     allowed_turns, analyse_junctions, branch_core_dims, check_junction_spacing, equal_cells, find_junction_overlap,
@@ -27,6 +27,7 @@ use crate::report::{
 };
 use crate::resources::short;
 use crate::surface::LumenSurface;
+use crate::units::LengthUnit;
 use crate::volume::{
     build_volume, JunctionOptimisation, JunctionVariant, JunctionWall, RadialLevels, VolumeInputs, QUALITY_BAR_SJ,
     WALL_MEAN_BAR_SJ,
@@ -1189,7 +1190,8 @@ pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(Str
     let mut warnings = vessel.settings.warnings.clone();
     let ends = end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, config.output_units.from_mm());
     warnings.extend(ends_not_meshed(&ends, config.output_units));
-    let mut report = build_report(&vessel.meshed, &vessel.surface, &vessel.centerline_source, config, timings, warnings);
+    let mut report =
+        build_report(&vessel.meshed, &vessel.surface, &vessel.centerline_source, config, timings, warnings);
     report.ends = ends;
     report.input.hygiene = vessel.hygiene.clone();
     report.additions = vessel.additions.clone().scaled(config.output_units.from_mm());

@@ -174,7 +174,11 @@ fn every_real_surface_gives_every_end_and_paths_inside_the_lumen() {
             failures.push(format!("{}: {} paths for {} ends", case.name, lines.len(), ex.ends.len()));
         }
         if in_lumen < interior {
-            failures.push(format!("{}: {} of {interior} path points outside the lumen", case.name, interior - in_lumen));
+            failures.push(format!(
+                "{}: {} of {interior} path points outside the lumen",
+                case.name,
+                interior - in_lumen
+            ));
         }
         if SAME_SURFACE_REFERENCES.contains(&case.name.as_str()) && !(median <= 0.02 && p95 <= 0.10) {
             failures.push(format!("{}: d/r median {median:.3} p95 {p95:.3} against its VMTK centerline", case.name));
