@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::extensions::ExtensionReport;
 use crate::input::{ReadLimits, TriangleSurface};
 use crate::mesh::VesselMesh;
-use crate::pipeline::Meshed;
+use crate::meshed::Meshed;
 use crate::progress::Progress;
 use crate::refinement::{Placement, RefinementReport};
 use crate::surface::LumenSurface;
@@ -189,18 +189,4 @@ pub fn scale_estimate(estimate: &mut crate::resources::MeshEstimate, config: &Me
         estimate.nodes *= cubes;
         estimate.bytes *= 1.0 + cubes;
     }
-}
-
-/// Meshes a vessel (both inputs in mm) and runs the added stages its settings ask for: what
-/// `vesselhex mesh` builds, without writing it (wall surfaces are read within `max_memory`).
-pub fn mesh_finished(
-    surface: &TriangleSurface,
-    centerlines: &crate::input::Centerlines,
-    config: &MeshConfig,
-    max_memory: u64,
-) -> Result<(Meshed, Additions)> {
-    let mut progress = Progress::new(true, 9 + stages(config));
-    let mut meshed = crate::pipeline::mesh_vessel(surface, centerlines, config, &mut progress)?;
-    let additions = finish(&mut meshed, surface, config, &ReadLimits::within(max_memory), &mut progress)?;
-    Ok((meshed, additions))
 }

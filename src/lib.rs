@@ -19,6 +19,7 @@ pub mod finishing;
 pub mod input;
 pub mod junction;
 pub mod mesh;
+pub mod meshed;
 pub mod output;
 pub mod pipeline;
 pub mod progress;

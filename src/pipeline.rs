@@ -1,7 +1,7 @@
 //! The `mesh` job: read, model the centerline, project the blocks, build the volume, annotate,
 //! measure and write. One function per stage boundary, data flowing forward only.
 
-use crate::accuracy::{surface_accuracy, SurfaceAccuracy};
+use crate::accuracy::surface_accuracy;
 use crate::annotate::annotate;
 use crate::blocks::{graded_levels, growth_ratio_for_first_cell, SectionTemplate};
 use crate::centerline::{Branch, CenterlineSample};
@@ -37,20 +37,7 @@ use nalgebra::Point3;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
-/// A finished mesh with what was learnt on the way.
-pub struct Meshed {
-    pub mesh: VesselMesh,
-    pub tree: CenterlineTree,
-    pub projected: Vec<ProjectedBranch>,
-    pub accuracy: SurfaceAccuracy,
-    /// Each branch's cross-section template, by branch.
-    pub templates: Vec<SectionTemplate>,
-    pub junctions: Vec<JunctionGeometry>,
-    /// The junction each element belongs to (its branch's transition), if any.
-    pub junction_of: Vec<Option<usize>>,
-    /// How the junctions were finished (wall growth, surface smoothing).
-    pub junction_variant: JunctionVariant,
-}
+pub use crate::meshed::Meshed;
 
 /// A branch ready for projection: its frames turned to meet its junctions' folds, and what
 /// lies at each end (junction, fold, transition length).
@@ -1051,6 +1038,21 @@ fn build_report(
         outputs: vec![],
         config: config.clone(),
     }
+}
+
+/// Meshes a vessel (both inputs in mm) and runs the added stages its settings ask for: what
+/// `vesselhex mesh` builds, without writing it (wall surfaces are read within `max_memory`).
+pub fn mesh_finished(
+    surface: &TriangleSurface,
+    centerlines: &crate::input::Centerlines,
+    config: &MeshConfig,
+    max_memory: u64,
+) -> Result<(Meshed, crate::finishing::Additions)> {
+    let mut progress = Progress::new(true, 9 + crate::finishing::stages(config));
+    let mut meshed = mesh_vessel(surface, centerlines, config, &mut progress)?;
+    let additions =
+        crate::finishing::finish(&mut meshed, surface, config, &ReadLimits::within(max_memory), &mut progress)?;
+    Ok((meshed, additions))
 }
 
 /// Where a vessel's centerlines come from.

@@ -32,7 +32,7 @@ fn all_ends() -> MeshConfig {
 fn extended(surface: &Path, centerlines: &Path, unit: LengthUnit) -> (VesselMesh, Vec<ExtensionReport>) {
     let s = read_surface(surface, unit).unwrap();
     let c = read_centerlines(centerlines, unit).unwrap();
-    let (meshed, additions) = vesselhex::finishing::mesh_finished(&s, &c, &all_ends(), u64::MAX)
+    let (meshed, additions) = vesselhex::pipeline::mesh_finished(&s, &c, &all_ends(), u64::MAX)
         .unwrap_or_else(|e| panic!("{}: {e}", surface.display()));
     (meshed.mesh, additions.extensions.expect("extensions reported"))
 }

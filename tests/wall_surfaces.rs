@@ -68,8 +68,8 @@ fn write_surfaces(dir: &Path, z: (f64, f64)) -> (PathBuf, [PathBuf; 2]) {
 fn meshed(config: &MeshConfig) -> (VesselMesh, VesselMesh) {
     let surface = straight_tube_surface(RADIUS, LENGTH, 96, 60);
     let centerline = straight_tube_centerline(RADIUS, LENGTH);
-    let with = vesselhex::finishing::mesh_finished(&surface, &centerline, config, u64::MAX).unwrap().0.mesh;
-    let plain = vesselhex::finishing::mesh_finished(&surface, &centerline, &MeshConfig::default(), u64::MAX);
+    let with = vesselhex::pipeline::mesh_finished(&surface, &centerline, config, u64::MAX).unwrap().0.mesh;
+    let plain = vesselhex::pipeline::mesh_finished(&surface, &centerline, &MeshConfig::default(), u64::MAX);
     (with, plain.unwrap().0.mesh)
 }
 

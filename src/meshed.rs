@@ -1,0 +1,25 @@
+//! A vessel meshed and not yet finished or written: the mesh and what was learnt on the way,
+//! shared by the pipeline that builds it and the stages that finish it.
+
+use crate::accuracy::SurfaceAccuracy;
+use crate::blocks::SectionTemplate;
+use crate::centerline::CenterlineTree;
+use crate::junction::JunctionGeometry;
+use crate::mesh::VesselMesh;
+use crate::projection::ProjectedBranch;
+use crate::volume::JunctionVariant;
+
+/// A finished mesh with what was learnt on the way.
+pub struct Meshed {
+    pub mesh: VesselMesh,
+    pub tree: CenterlineTree,
+    pub projected: Vec<ProjectedBranch>,
+    pub accuracy: SurfaceAccuracy,
+    /// Each branch's cross-section template, by branch.
+    pub templates: Vec<SectionTemplate>,
+    pub junctions: Vec<JunctionGeometry>,
+    /// The junction each element belongs to (its branch's transition), if any.
+    pub junction_of: Vec<Option<usize>>,
+    /// How the junctions were finished (wall growth, surface smoothing).
+    pub junction_variant: JunctionVariant,
+}
