@@ -313,13 +313,7 @@ impl SmoothSurface<'_> {
                 chord
             }
         };
-        let (t0, t1) = (tangent(a), tangent(b));
-        let (u2, u3) = (u * u, u * u * u);
-        let h00 = 2.0 * u3 - 3.0 * u2 + 1.0;
-        let h10 = u3 - 2.0 * u2 + u;
-        let h01 = -2.0 * u3 + 3.0 * u2;
-        let h11 = u3 - u2;
-        Point3::from(p0.coords * h00 + t0 * h10 + p1.coords * h01 + t1 * h11)
+        crate::junction::hermite(&p0, &tangent(a), &p1, &tangent(b), u)
     }
 
     /// The Coons patch of the face with corners c (a cycle) at (s, t).
