@@ -879,23 +879,14 @@ fn end_kind(end: &crate::projection::BranchEnd) -> &'static str {
     }
 }
 
-/// The ends of centerlines given: the first polyline's start (the inlet) and every polyline's
-/// last point, each once.
-fn centerline_ends(centerlines: &Centerlines) -> (Vec<VesselEnd>, usize) {
-    let mut ends: Vec<VesselEnd> = vec![];
-    let mut add = |p: &Point3<f64>, r: Option<f64>| {
-        if !ends.iter().any(|e| (e.centre - p).norm() < 1e-9) {
-            ends.push(VesselEnd { centre: *p, radius: r.unwrap_or(0.0), kind: EndKind::Centerline });
-        }
-    };
-    for (k, line) in centerlines.polylines.iter().enumerate() {
-        let radius = |i: usize| line.radii.as_ref().map(|r| r[i]);
-        if k == 0 {
-            add(&line.points[0], radius(0));
-        }
-        add(&line.points[line.points.len() - 1], radius(line.points.len() - 1));
-    }
-    (ends, 0)
+/// The ends of a tree built on centerlines given: its inlet (the start of the branch with no
+/// junction upstream) and each leaf branch's last sample. Read from the tree rather than the
+/// file, whose polylines may be overlapping paths, branch-split tracts or two-node segments.
+fn tree_ends(tree: &CenterlineTree) -> (Vec<VesselEnd>, usize) {
+    let end = |s: &CenterlineSample| VesselEnd { centre: s.point, radius: s.radius, kind: EndKind::Centerline };
+    let inlets = tree.branches.iter().filter(|b| b.start_junction.is_none()).filter_map(|b| b.samples.first());
+    let outlets = tree.branches.iter().filter(|b| b.daughters.is_empty()).filter_map(|b| b.samples.last());
+    (inlets.chain(outlets).map(end).collect(), 0)
 }
 
 /// A meshed branch ends within this many of the end's radii of its centre (a dome's mesh stops
@@ -1112,16 +1103,15 @@ pub fn mesh_surface(
     settings.warnings.extend(config.warnings());
     let (surface, hygiene) = clean_surface(surface)?;
     settings.warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
-    let (centerlines, centerline_source, (ends, inlet)) = match centerlines {
+    let (centerlines, centerline_source, found_ends) = match centerlines {
         CenterlineSource::Given(centerlines) => {
             let source = centerlines.source.clone();
-            let ends = centerline_ends(&centerlines);
-            (centerlines, source, ends)
+            (centerlines, source, None)
         }
         CenterlineSource::Extract(options) => {
             let extraction = crate::centerline_extract::extract_centerlines(&surface, &options)?;
             settings.warnings.extend(extraction.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
-            let ends = (extraction.ends, extraction.inlet);
+            let ends = Some((extraction.ends, extraction.inlet));
             (extraction.centerlines, PathBuf::from("(computed from the surface)"), ends)
         }
     };
@@ -1134,6 +1124,7 @@ pub fn mesh_surface(
     let mut meshed = mesh_vessel(&surface, &centerlines, config, progress).map_err(|e| name_winding(e, &surface))?;
     let limits = ReadLimits::within(settings.max_memory);
     let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress)?;
+    let (ends, inlet) = found_ends.unwrap_or_else(|| tree_ends(&meshed.tree));
     Ok(MeshedVessel { meshed, surface, centerline_source, centerlines, ends, inlet, hygiene, additions, settings })
 }
 

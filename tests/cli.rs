@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{crate_dir, files_under, fixture, mesh_cli, path_str, temp_dir, vesselhex};
+use common::{crate_dir, files_under, fixture, mesh_cli, mesh_surface_cli, path_str, temp_dir, vesselhex};
 use std::path::Path;
 
 #[test]
@@ -41,6 +41,38 @@ fn outputs_and_report_keys() {
         std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     names.sort();
     assert_eq!(names, ["mesh.vtu", "report.json"]);
+}
+
+/// `report.json` `ends`: the vessel's ends, whatever the centerlines' layout. A branch-split
+/// file's tracts end inside the junction too; those are not vessel ends. From the bare surface
+/// the same three open ends are found, each meshed.
+#[test]
+fn every_end_is_reported_once_and_meshed() {
+    let dir = temp_dir("ends");
+    let (stl, _) = fixture("y_bifurcation");
+    let split = dir.join("split.vtp");
+    let o = vesselhex(&[
+        "centerlines",
+        "--surface",
+        path_str(&stl),
+        "--output",
+        path_str(&dir.join("paths.vtp")),
+        "--branch-split",
+        path_str(&split),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let given = mesh_cli(&stl, &split, &dir.join("given"), &["--preset", "coarse"]);
+    let found = mesh_surface_cli(&stl, &dir.join("found"), &["--preset", "coarse"]);
+    for (report, kind) in [(&given, "centerline"), (&found, "open")] {
+        let ends = report["ends"].as_array().unwrap();
+        assert_eq!(ends.len(), 3, "{kind}: {ends:?}");
+        assert!(ends.iter().all(|e| e["meshed"] == true && e["kind"] == kind), "{ends:?}");
+        assert_eq!(ends.iter().filter(|e| e["inlet"] == true).count(), 1);
+        // The inlet is the Y's trunk, at z = -17.2 mm.
+        let inlet = ends.iter().find(|e| e["inlet"] == true).unwrap();
+        assert!((inlet["position"][2].as_f64().unwrap() + 17.2).abs() < 0.5, "{inlet}");
+    }
 }
 
 #[test]
