@@ -68,7 +68,7 @@ use crate::input::{topology, CenterlinePolyline, Centerlines, TriangleSurface};
 use crate::surface::LumenSurface;
 use indexmap::IndexMap;
 use medial::{Ball, BallGraph};
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 /// Output points are spaced by this fraction of the path's small radii.
@@ -124,94 +124,15 @@ pub struct Extraction {
 /// Computes the centerlines of a lumen surface (millimetres). Never panics on bad geometry:
 /// failures (too few ends, an end not connected to the inlet) are errors naming the fix.
 pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) -> Result<Extraction> {
-    let source = &surface.source;
-    let vertices = &surface.vertices;
     let mut notes = vec![];
-    let mut triangles = surface.triangles.clone();
-    let flipped = topology::orient_consistently(&mut triangles);
-    if flipped > 0 {
-        notes.push(format!("{flipped} triangles wound against their neighbours were flipped"));
-    }
-
-    // The surface closed by a fan on every boundary loop (ends and holes alike) and facing
-    // out: its inner Voronoi diagram is the medial axis.
-    let loops = topology::boundary_loops(&triangles);
-    let sign = if topology::signed_volume6(vertices, &triangles, &loops) > 0.0 { -1.0 } else { 1.0 };
-    let (closed_vertices, closed_triangles) = topology::close_with_caps(vertices, &triangles, &loops, sign);
-    let (samples, normals) = sampling::resample(&closed_vertices, &closed_triangles);
-    let mut graph = voronoi::medial_graph(&samples, &normals).map_err(|e| Error::input(source, e))?;
-
-    // Ends with a boundary: loops and flat caps that span the vessel behind them.
-    let (mut found, holes) = ends::loop_ends(vertices, &loops, |c, radius| graph.pole(c, 0.5 * radius).radius);
-    for h in &holes {
-        notes.push(format!(
-            "a boundary loop at ({:.3}, {:.3}, {:.3}) mm of radius {:.3} mm was left out as a hole in the wall (the \
-             vessel there has radius {:.3} mm)",
-            h.centre.x, h.centre.y, h.centre.z, h.radius, h.vessel_radius
-        ));
-    }
-    let tags = surface.triangle_tags.as_ref().map(|(_, t)| t.as_slice());
-    // Flat caps: cut ones (a sharp rim) that span the vessel now; blunt ones (a rounded rim)
-    // only where the paths to every other end leave them uncovered (below).
-    let (caps, blunt): (Vec<Cap>, Vec<Cap>) = ends::find_caps(vertices, &triangles, tags)
-        .into_iter()
-        .filter(|cap| cap.end.radius >= CAP_SPAN * graph.pole(&cap.end.centre, 0.5 * cap.end.radius).radius)
-        .partition(|cap| cap.sharp_rim);
-    if !caps.is_empty() {
-        notes.push(format!("{} flat caps taken off", caps.len()));
-    }
-    let mut in_cap = vec![false; triangles.len()];
-    for cap in &caps {
-        cap.triangles.iter().for_each(|&t| in_cap[t as usize] = true);
-        found.push(cap.end);
-    }
-    found = ends::merge_nested(found);
-    let open: Vec<[u32; 3]> = triangles.iter().zip(&in_cap).filter(|(_, c)| !**c).map(|(t, _)| *t).collect();
-    let inward: Vec<_> = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
-    let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
-
-    // Ends as graph nodes; then the points given and the rounded ends.
-    let mut end_nodes: Vec<u32> =
-        found.iter().map(|e| graph.add_end(Ball { centre: e.centre, radius: e.radius })).collect();
-    let (lo, hi) = lumen.bounding_box();
-    for p in &options.ends {
-        if found.iter().any(|e| (e.centre - p).norm() < SAME_END * e.radius) {
-            continue;
-        }
-        let ball = given_end_ball(p, &lumen, &inward, (hi - lo).norm())?;
-        found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Given });
-        end_nodes.push(graph.add_end(ball));
-    }
-    let beside_open_ends = found.iter().any(|e| e.kind == EndKind::Open);
-    for node in
-        rounded::rounded_ends(&graph, &paths_between(&graph, &end_nodes), end_nodes.is_empty(), beside_open_ends)
-    {
-        let ball = graph.nodes[node as usize];
-        found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Dome });
-        end_nodes.push(node);
-    }
-    // Blunt ends: a flat face with a rounded rim that the paths to every other end leave
-    // beyond their balls (a short, wide vessel whose tip the rounded-end search does not take
-    // for a vessel). A flat patch of a wall lies against those balls.
-    // Its faces stay in the surface the radii are measured on: the mesh stops short of it.
-    let covered = paths_between(&graph, &end_nodes);
-    for cap in blunt {
-        let gap =
-            covered.iter().map(|&n| graph.nodes[n as usize]).map(|b| (b.centre - cap.end.centre).norm() - b.radius);
-        let beyond = gap.fold(f64::INFINITY, f64::min) > 0.5 * cap.end.radius;
-        // An end found nearby (a dome's ball lies a radius or two inside its tip) is this one.
-        let near = |e: &VesselEnd| (e.centre - cap.end.centre).norm() < BLUNT_SAME_END * e.radius.max(cap.end.radius);
-        if beyond && !found.iter().any(near) {
-            // Like a dome's, the end is the inscribed ball under the face: the face stays in
-            // the surface, so a path to the face itself would narrow to nothing there.
-            let ball = graph.pole(&cap.end.centre, 0.5 * cap.end.radius);
-            end_nodes.push(graph.add_end(ball));
-            found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: cap.end.kind });
-        }
-    }
+    let mut search = EndSearch::new(surface, &mut notes)?;
+    search.add_given(&options.ends)?;
+    search.add_rounded();
+    search.add_blunt();
+    let EndSearch { graph, found, end_nodes, lumen, holes, .. } = search;
     if found.len() < 2 {
         return Err(Error::input(
-            source,
+            &surface.source,
             format!(
                 "found {} vessel end(s) ({} given with --ends), a centerline needs at least 2: the surface holds one \
                  vessel end or none that vesselhex can recognise (open boundary, flat cap or rounded tip). Give a \
@@ -221,21 +142,139 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
             ),
         ));
     }
-
     let inlet = ends::choose_inlet(&found, options.inlet);
     if options.inlet == InletChoice::Largest {
-        let mut radii: Vec<f64> = found.iter().map(|e| e.radius).collect();
-        radii.sort_by(|a, b| b.total_cmp(a));
-        if radii[1] > AMBIGUOUS_INLET * radii[0] {
-            notes.push(format!(
-                "the two largest ends have nearly the same radius ({:.3} and {:.3} mm): the inlet was taken as the \
-                 largest; give --inlet x,y,z to choose",
-                radii[0], radii[1]
-            ));
-        }
+        notes.extend(ambiguous_inlet(&found));
     }
     let polylines = trace(&graph, &found, &end_nodes, inlet, &lumen)?;
-    Ok(Extraction { centerlines: Centerlines { polylines, source: source.clone() }, ends: found, inlet, holes, notes })
+    let centerlines = Centerlines { polylines, source: surface.source.clone() };
+    Ok(Extraction { centerlines, ends: found, inlet, holes, notes })
+}
+
+/// A note when the two largest ends have nearly the same radius (see [`AMBIGUOUS_INLET`]).
+fn ambiguous_inlet(found: &[VesselEnd]) -> Option<String> {
+    let mut radii: Vec<f64> = found.iter().map(|e| e.radius).collect();
+    radii.sort_by(|a, b| b.total_cmp(a));
+    (radii[1] > AMBIGUOUS_INLET * radii[0]).then(|| {
+        format!(
+            "the two largest ends have nearly the same radius ({:.3} and {:.3} mm): the inlet was taken as the \
+             largest; give --inlet x,y,z to choose",
+            radii[0], radii[1]
+        )
+    })
+}
+
+/// The medial axis of a surface and the ends found on it so far, each a node of the graph.
+struct EndSearch {
+    graph: BallGraph,
+    found: Vec<VesselEnd>,
+    end_nodes: Vec<u32>,
+    /// The surface the radii are measured on (cut caps taken off), and its inward normals.
+    lumen: LumenSurface,
+    inward: Vec<Vector3<f64>>,
+    holes: Vec<Hole>,
+    /// Flat faces with a rounded rim, ends only where the paths leave them uncovered.
+    blunt: Vec<Cap>,
+}
+
+impl EndSearch {
+    /// The medial axis, and the ends with a boundary: loops and cut flat caps that span the
+    /// vessel behind them.
+    fn new(surface: &TriangleSurface, notes: &mut Vec<String>) -> Result<EndSearch> {
+        let (source, vertices) = (&surface.source, &surface.vertices);
+        let mut triangles = surface.triangles.clone();
+        let flipped = topology::orient_consistently(&mut triangles);
+        if flipped > 0 {
+            notes.push(format!("{flipped} triangles wound against their neighbours were flipped"));
+        }
+        // The surface closed by a fan on every boundary loop (ends and holes alike) and facing
+        // out: its inner Voronoi diagram is the medial axis.
+        let loops = topology::boundary_loops(&triangles);
+        let sign = if topology::signed_volume6(vertices, &triangles, &loops) > 0.0 { -1.0 } else { 1.0 };
+        let (closed_vertices, closed_triangles) = topology::close_with_caps(vertices, &triangles, &loops, sign);
+        let (samples, normals) = sampling::resample(&closed_vertices, &closed_triangles);
+        let mut graph = voronoi::medial_graph(&samples, &normals).map_err(|e| Error::input(source, e))?;
+
+        let (mut found, holes) = ends::loop_ends(vertices, &loops, |c, radius| graph.pole(c, 0.5 * radius).radius);
+        notes.extend(holes.iter().map(|h| {
+            format!(
+                "a boundary loop at ({:.3}, {:.3}, {:.3}) mm of radius {:.3} mm was left out as a hole in the wall \
+                 (the vessel there has radius {:.3} mm)",
+                h.centre.x, h.centre.y, h.centre.z, h.radius, h.vessel_radius
+            )
+        }));
+        let tags = surface.triangle_tags.as_ref().map(|(_, t)| t.as_slice());
+        // Flat caps: cut ones (a sharp rim) that span the vessel now; blunt ones (a rounded rim)
+        // later, in `add_blunt`.
+        let (caps, blunt): (Vec<Cap>, Vec<Cap>) = ends::find_caps(vertices, &triangles, tags)
+            .into_iter()
+            .filter(|cap| cap.end.radius >= CAP_SPAN * graph.pole(&cap.end.centre, 0.5 * cap.end.radius).radius)
+            .partition(|cap| cap.sharp_rim);
+        if !caps.is_empty() {
+            notes.push(format!("{} flat caps taken off", caps.len()));
+        }
+        let mut in_cap = vec![false; triangles.len()];
+        for cap in &caps {
+            cap.triangles.iter().for_each(|&t| in_cap[t as usize] = true);
+            found.push(cap.end);
+        }
+        found = ends::merge_nested(found);
+        let open: Vec<[u32; 3]> = triangles.iter().zip(&in_cap).filter(|(_, c)| !**c).map(|(t, _)| *t).collect();
+        let inward = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
+        let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
+        let end_nodes = found.iter().map(|e| graph.add_end(Ball { centre: e.centre, radius: e.radius })).collect();
+        Ok(EndSearch { graph, found, end_nodes, lumen, inward, holes, blunt })
+    }
+
+    /// The points given (`--ends`) that name no end found: the inscribed balls under them.
+    fn add_given(&mut self, points: &[Point3<f64>]) -> Result<()> {
+        let (lo, hi) = self.lumen.bounding_box();
+        for p in points {
+            if self.found.iter().any(|e| (e.centre - p).norm() < SAME_END * e.radius) {
+                continue;
+            }
+            let ball = given_end_ball(p, &self.lumen, &self.inward, (hi - lo).norm())?;
+            self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Given });
+            self.end_nodes.push(self.graph.add_end(ball));
+        }
+        Ok(())
+    }
+
+    /// Rounded ends: the vessels the paths between the ends so far do not reach (see `rounded`).
+    fn add_rounded(&mut self) {
+        let beside_open_ends = self.found.iter().any(|e| e.kind == EndKind::Open);
+        let covered = paths_between(&self.graph, &self.end_nodes);
+        for node in rounded::rounded_ends(&self.graph, &covered, self.end_nodes.is_empty(), beside_open_ends) {
+            let ball = self.graph.nodes[node as usize];
+            self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Dome });
+            self.end_nodes.push(node);
+        }
+    }
+
+    /// Blunt ends: a flat face with a rounded rim that the paths to every other end leave
+    /// beyond their balls (a short, wide vessel whose tip the rounded-end search does not take
+    /// for a vessel); a flat patch of a wall lies against those balls. Its faces stay in the
+    /// surface the radii are measured on: the mesh stops short of it.
+    fn add_blunt(&mut self) {
+        let covered = paths_between(&self.graph, &self.end_nodes);
+        for cap in std::mem::take(&mut self.blunt) {
+            let gap = covered
+                .iter()
+                .map(|&n| self.graph.nodes[n as usize])
+                .map(|b| (b.centre - cap.end.centre).norm() - b.radius);
+            let beyond = gap.fold(f64::INFINITY, f64::min) > 0.5 * cap.end.radius;
+            // An end found nearby (a dome's ball lies a radius or two inside its tip) is this one.
+            let near =
+                |e: &VesselEnd| (e.centre - cap.end.centre).norm() < BLUNT_SAME_END * e.radius.max(cap.end.radius);
+            if beyond && !self.found.iter().any(near) {
+                // Like a dome's, the end is the inscribed ball under the face: the face stays in
+                // the surface, so a path to the face itself would narrow to nothing there.
+                let ball = self.graph.pole(&cap.end.centre, 0.5 * cap.end.radius);
+                self.end_nodes.push(self.graph.add_end(ball));
+                self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: cap.end.kind });
+            }
+        }
+    }
 }
 
 /// The nodes on the shortest paths from the first of `ends` to the others (all of them when it
@@ -339,12 +378,7 @@ fn trace(
 /// tip, which no larger ball overlaps. Fails when the point lies outside the surface by more than
 /// [`FAR_FROM_SURFACE`] times the radius of that ball (a point given in the wrong unit, or off
 /// the vessel).
-fn given_end_ball(
-    p: &Point3<f64>,
-    lumen: &LumenSurface,
-    inward: &[nalgebra::Vector3<f64>],
-    diagonal: f64,
-) -> Result<Ball> {
+fn given_end_ball(p: &Point3<f64>, lumen: &LumenSurface, inward: &[Vector3<f64>], diagonal: f64) -> Result<Ball> {
     let source = &lumen.source;
     let hit = lumen.closest(p);
     let tri = lumen
