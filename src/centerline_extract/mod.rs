@@ -345,8 +345,9 @@ fn trace(
         next_of.entry(chain[chain.len() - 1]).or_default().push(u32::MAX);
     }
     let branches_at = |n: u32| next_of.get(&n).is_some_and(|v| v.len() > 1);
-    let mut smoothed: std::collections::HashMap<(u32, u32), (Vec<Point3<f64>>, Vec<f64>)> =
-        std::collections::HashMap::new();
+    // Each stretch between two branch nodes, smoothed once: its points and radii.
+    type Stretch = (Vec<Point3<f64>>, Vec<f64>);
+    let mut smoothed: std::collections::HashMap<(u32, u32), Stretch> = std::collections::HashMap::new();
     let mut polylines = vec![];
     for chain in &chains {
         let (mut points, mut radii): (Vec<Point3<f64>>, Vec<f64>) = (vec![], vec![]);

@@ -83,7 +83,8 @@ pub fn resample(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> (Vec<Point3
         let h = t.iter().map(|&i| spacing[i as usize]).fold(f64::INFINITY, f64::min);
         let longest = (b - a).norm().max((c - b).norm()).max((a - c).norm());
         let Some(n) = (b - a).cross(&(c - a)).try_normalize(0.0) else { continue };
-        if !(longest > h) {
+        // Short enough, or no spacing known (NaN): left as it is.
+        if longest.partial_cmp(&h) != Some(std::cmp::Ordering::Greater) {
             continue;
         }
         let k = (longest / h).ceil().min(MAX_SPLITS) as usize;

@@ -74,7 +74,8 @@ fn circumcentre(p: [Point3<f64>; 4]) -> Option<Point3<f64>> {
     let (u, v, w) = (p[1] - p[0], p[2] - p[0], p[3] - p[0]);
     let det = u.dot(&v.cross(&w));
     let scale = u.norm().max(v.norm()).max(w.norm());
-    if !(det.abs() > 1e-12 * scale.powi(3)) {
+    // A flat (or non-finite) tetrahedron has no circumcentre worth keeping.
+    if det.abs().partial_cmp(&(1e-12 * scale.powi(3))) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     let num = v.cross(&w) * u.norm_squared() + w.cross(&u) * v.norm_squared() + u.cross(&v) * w.norm_squared();

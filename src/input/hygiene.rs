@@ -94,8 +94,7 @@ impl HygieneReport {
 
 /// The surface made fit for meshing (see the module's doc), and what was done.
 pub fn clean_surface(mut surface: TriangleSurface) -> Result<(TriangleSurface, HygieneReport)> {
-    let mut report = HygieneReport::default();
-    report.vertices_welded = weld(&mut surface);
+    let mut report = HygieneReport { vertices_welded: weld(&mut surface), ..Default::default() };
     drop_degenerate_and_repeated(&mut surface, &mut report);
     drop_fragments(&mut surface, &mut report)?;
     report.triangles_flipped = orient_consistently(&mut surface.triangles);
