@@ -884,9 +884,15 @@ fn end_kind(end: &crate::projection::BranchEnd) -> &'static str {
 /// file, whose polylines may be overlapping paths, branch-split tracts or two-node segments.
 fn tree_ends(tree: &CenterlineTree) -> (Vec<VesselEnd>, usize) {
     let end = |s: &CenterlineSample| VesselEnd { centre: s.point, radius: s.radius, kind: EndKind::Centerline };
+    (tree_terminals(tree).map(end).collect(), 0)
+}
+
+/// The tree's vessel ends: the first sample of the branch with no junction upstream (the
+/// inlet), then the last sample of each leaf branch.
+fn tree_terminals(tree: &CenterlineTree) -> impl Iterator<Item = &CenterlineSample> {
     let inlets = tree.branches.iter().filter(|b| b.start_junction.is_none()).filter_map(|b| b.samples.first());
     let outlets = tree.branches.iter().filter(|b| b.daughters.is_empty()).filter_map(|b| b.samples.last());
-    (inlets.chain(outlets).map(end).collect(), 0)
+    inlets.chain(outlets)
 }
 
 /// A meshed branch ends within this many of the end's radii of its centre (a dome's mesh stops
@@ -898,15 +904,7 @@ const MESHED_END_BRANCH_RADII: f64 = 1.0;
 /// Every end with whether a branch of the mesh ends at it (see [`MESHED_END_REACH`]), in the
 /// output unit (`scale` per mm).
 fn end_reports(ends: &[VesselEnd], inlet: usize, tree: &CenterlineTree, scale: f64) -> Vec<EndReport> {
-    let terminals: Vec<&CenterlineSample> = tree
-        .branches
-        .iter()
-        .flat_map(|b| {
-            let first = b.start_junction.is_none().then(|| b.samples.first()).flatten();
-            let last = b.daughters.is_empty().then(|| b.samples.last()).flatten();
-            first.into_iter().chain(last)
-        })
-        .collect();
+    let terminals: Vec<&CenterlineSample> = tree_terminals(tree).collect();
     ends.iter()
         .enumerate()
         .map(|(k, e)| EndReport {

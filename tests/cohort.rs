@@ -14,6 +14,7 @@ use std::path::Path;
 use std::time::Instant;
 use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions};
 use vesselhex::input::{clean_surface, read_centerlines, read_surface, topology, CenterlinePolyline, TriangleSurface};
+use vesselhex::surface::LumenSurface;
 use vesselhex::units::LengthUnit;
 
 /// The centerline each case ships, where it has one.
@@ -74,37 +75,15 @@ fn percentile(values: &mut [f64], q: f64) -> f64 {
     values[((values.len() - 1) as f64 * q).round() as usize]
 }
 
-/// The surface closed by a fan on each boundary loop, facing out.
-struct Closed {
-    vertices: Vec<Point3<f64>>,
-    triangles: Vec<[u32; 3]>,
-}
-
-impl Closed {
-    fn of(surface: &TriangleSurface) -> Closed {
-        let loops = topology::boundary_loops(&surface.triangles);
-        // Hygiene wound the triangles outward (a positive signed volume).
-        let (vertices, triangles) = topology::close_with_caps(&surface.vertices, &surface.triangles, &loops, -1.0);
-        Closed { vertices, triangles }
-    }
-
-    /// Whether `p` lies inside: its generalised winding number (the solid angle the closed
-    /// surface subtends at `p`, over 4 pi; Jacobson et al. 2013) is above one half. Unlike a
-    /// normal's sign at the closest point, this does not depend on which triangle is closest.
-    fn holds(&self, p: &Point3<f64>) -> bool {
-        let solid_angle: f64 = self
-            .triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| self.vertices[i as usize] - p);
-                let (la, lb, lc) = (a.norm(), b.norm(), c.norm());
-                let numerator = a.dot(&b.cross(&c));
-                let denominator = la * lb * lc + a.dot(&b) * lc + b.dot(&c) * la + c.dot(&a) * lb;
-                2.0 * numerator.atan2(denominator)
-            })
-            .sum();
-        solid_angle / (4.0 * std::f64::consts::PI) > 0.5
-    }
+/// The surface closed by a fan on each boundary loop, facing out: a point is inside the lumen
+/// when its generalised winding number (`LumenSurface::winding_number`) is above one half.
+/// Unlike a normal's sign at the closest point, this does not depend on which triangle is
+/// closest.
+fn closed(surface: &TriangleSurface) -> LumenSurface {
+    let loops = topology::boundary_loops(&surface.triangles);
+    // Hygiene wound the triangles outward (a positive signed volume).
+    let (vertices, triangles) = topology::close_with_caps(&surface.vertices, &surface.triangles, &loops, -1.0);
+    LumenSurface::from_parts(vertices, triangles, surface.source.clone()).unwrap()
 }
 
 #[test]
@@ -131,7 +110,7 @@ fn every_real_surface_gives_every_end_and_paths_inside_the_lumen() {
             }
         };
         let lines = &ex.centerlines.polylines;
-        let closed = Closed::of(&surface);
+        let closed = closed(&surface);
         // Inside, away from the end points themselves (an open end's centre lies in its loop).
         let (mut interior, mut in_lumen) = (0usize, 0usize);
         for l in lines {
@@ -140,7 +119,7 @@ fn every_real_surface_gives_every_end_and_paths_inside_the_lumen() {
                 let near_end = ex.ends.iter().any(|e| (p - e.centre).norm() < e.radius.max(*r));
                 if !near_end {
                     interior += 1;
-                    in_lumen += usize::from(closed.holds(p));
+                    in_lumen += usize::from(closed.winding_number(p) > 0.5);
                 }
             }
         }
