@@ -492,7 +492,15 @@ fn centerlines(
     let max_memory = max_memory.unwrap_or_else(vesselhex::resources::default_max_memory);
     let surface = read_surface(surface_path, surface_arrays, units, max_memory)?;
     let options = extract_options(inlet, ends, units);
-    let extraction = py.detach(move || extract_centerlines(&surface, &options)).map_err(to_py)?;
+    // As `vesselhex centerlines` does: the surface cleaned first, its repairs noted first.
+    let extraction = py
+        .detach(move || -> vesselhex::Result<Extraction> {
+            let (surface, hygiene) = vesselhex::input::clean_surface(surface)?;
+            let mut extraction = extract_centerlines(&surface, &options)?;
+            extraction.notes.splice(0..0, hygiene.notes());
+            Ok(extraction)
+        })
+        .map_err(to_py)?;
     Ok(Centerlines { extraction, units })
 }
 
