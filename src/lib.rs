@@ -20,6 +20,7 @@ pub mod input;
 pub mod junction;
 pub mod mesh;
 pub mod meshed;
+pub mod node_optimisation;
 pub mod output;
 pub mod pipeline;
 pub mod progress;

@@ -201,10 +201,6 @@ impl FinishQuality {
     }
 }
 
-/// BRANCHING.md §6's target for the worst junction element; below it, the junction finishes
-/// are tried again with the pattern search.
-const JUNCTION_TARGET_SJ: f64 = 0.3;
-
 /// Least stretch of ordinary sections between two junctions' transitions, in end radii (the
 /// sum of the branch's two end radii); less, and the branch is a bridge.
 const MIN_ORDINARY_STRETCH: f64 = 0.25;
@@ -454,8 +450,13 @@ pub fn mesh_vessel(
         match attempt {
             Ok(meshed) => {
                 let quality = FinishQuality::of_mesh(&meshed.mesh);
+                let meets_bars = quality.meets_bars();
                 if best.as_ref().is_none_or(|(_, b)| quality.better_than(b)) {
                     best = Some((meshed, quality));
+                }
+                // The first place within the bars is kept: each costs a whole mesh.
+                if meets_bars {
+                    break;
                 }
             }
             Err(e) => {
@@ -644,11 +645,13 @@ pub fn mesh_tree(
     let best_of = |built: &[FinishedVolume]| {
         (1..built.len()).fold(0, |best, i| if built[i].3.better_than(&built[best].3) { i } else { best })
     };
-    let best_worst = |built: &[FinishedVolume]| built.iter().map(|b| b.3.worst).fold(f64::NEG_INFINITY, f64::max);
-    // Below BRANCHING.md's junction target, the same finishes again with the slower pattern
-    // search (the synthetic Y at 30 degrees and 4:1: 0.190 -> 0.293; it can also lose, hence
-    // both are kept in the running).
-    if !junctions.is_empty() && best_worst(&built) < JUNCTION_TARGET_SJ {
+    // Every finish has had its poor elements optimised (`build_volume`), so the later rounds are
+    // for a vessel still short of a bar, not for a better finish within them: each costs about
+    // the time of the first.
+    let short_of_bars = |built: &[FinishedVolume]| !built[best_of(built)].3.meets_bars();
+    // Short of a bar, the same finishes again with the slower pattern search (the synthetic Y at
+    // 30 degrees and 4:1: 0.190 -> 0.293; it can also lose, hence both are kept in the running).
+    if !junctions.is_empty() && short_of_bars(&built) {
         let searched: Vec<_> =
             optimisations.iter().map(|&o| JunctionOptimisation { pattern_search: true, ..o }).collect();
         keep(build_all(&searched, &walls), &mut built);
@@ -658,13 +661,12 @@ pub fn mesh_tree(
     // 4:1 goes from 0.234 to 0.350). Only then: bent pages reshape the crotch's lumen faces,
     // which inflate unevenly (simvascular_demo_aortoiliac at coarse, whose junction the pattern
     // search already takes past the target: a crotch face's area shrank by 24 % under pressure).
-    if !junctions.is_empty() && best_worst(&built) < JUNCTION_TARGET_SJ {
+    if !junctions.is_empty() && short_of_bars(&built) {
         let pages: Vec<_> = [false, true]
             .map(|pattern_search| JunctionOptimisation {
                 slide_surface_nodes: true,
                 pattern_search,
                 move_pages: true,
-                ..Default::default()
             })
             .to_vec();
         keep(build_all(&pages, &walls), &mut built);
@@ -679,16 +681,7 @@ pub fn mesh_tree(
         built.append(&mut reserve);
     }
     let chosen = best_of(&built);
-    let (mut mesh, junction_of, mut junction_variant, worst_found) = built.into_iter().nth(chosen).expect("a variant");
-    // The variant kept, with its junction walls optimised where one is below the bar. After the
-    // choice, not before: optimised walls would change which variant is kept (on
-    // simvascular_demo_aortoiliac at coarse, one whose crotch faces inflate unevenly).
-    if worst_found.worst_wall < QUALITY_BAR_SJ {
-        let optimisation = JunctionOptimisation { improve_walls: true, ..junction_variant.optimisation };
-        let (meshes, _) = build_volume(&inputs, optimisation, &[junction_variant.wall]);
-        mesh = meshes.into_iter().next().expect("one wall asked for");
-        junction_variant.optimisation = optimisation;
-    }
+    let (mut mesh, junction_of, junction_variant, _) = built.into_iter().nth(chosen).expect("a variant");
 
     progress.stage("annotation");
     annotate(&mut mesh);

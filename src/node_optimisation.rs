@@ -1,0 +1,288 @@
+//! Moves free nodes of a hexahedral mesh to untangle and improve the elements around them, as
+//! Mesquite-style local optimisers do: one smooth objective over the free nodes' elements,
+//! minimised node by node (a Gauss-Seidel sweep of steepest-descent steps with backtracking),
+//! each node kept where its kind of freedom allows (free, on the lumen surface, or across its
+//! wall's growth direction).
+//!
+//! The objective is a penalty on the nine terms of Verdict's scaled Jacobian (eight corners
+//! and the centroid, see [`crate::quality`]): every term below [`TARGET`] costs its shortfall
+//! squared, and a negative one ten times more. It is smooth (where edges do not vanish) and zero
+//! on elements already past the target, so untangling comes first (an inverted corner costs
+//! most) and then shape, every poor corner at once. A max-min objective, raised one node at a
+//! time, stalls where two poor elements share nodes that each wants elsewhere.
+
+use crate::mesh::{Hex, HEX_CORNER_NEIGHBOURS};
+use crate::surface::LumenSurface;
+use nalgebra::{Point3, Vector3};
+
+/// Scaled-Jacobian terms below this are penalised: above the bar (0.2) with a margin, so that
+/// the optimised elements clear it.
+pub const TARGET: f64 = 0.3;
+/// Weight of an inverted term's determinant (over the element's size cubed).
+const INVERTED_WEIGHT: f64 = 10.0;
+/// At most this many sweeps over the free nodes.
+const MAX_SWEEPS: usize = 60;
+/// The sweeps stop when the objective falls by less than this share over a sweep.
+const STALLED_SHARE: f64 = 1e-3;
+/// Largest step, as a share of the node's shortest edge.
+const MAX_STEP: f64 = 0.25;
+/// Finite-difference step of the gradient, as a share of the node's shortest edge.
+const GRADIENT_STEP: f64 = 1e-5;
+/// Halvings of the step before a node is left where it is.
+const BACKTRACKS: usize = 6;
+
+/// How an optimised node may move.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Freedom {
+    Fixed,
+    /// Anywhere.
+    Free,
+    /// On the lumen surface: moved, then put back onto the nearest point of the triangles.
+    OnSurface,
+    /// Across a wall's growth direction (unit), so the wall keeps its thickness.
+    Across(Vector3<f64>),
+}
+
+/// The penalty of one element (see the module's documentation); `size` is a length of the
+/// element, fixed while it is optimised (the centroid term's axes span twice the element, so
+/// they count a quarter).
+pub fn element_penalty(c: &[Point3<f64>; 8], size: f64) -> f64 {
+    let volume = size * size * size;
+    let term = |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>, volume: f64| {
+        let l = a.norm() * b.norm() * d.norm();
+        let det = a.cross(&b).dot(&d);
+        let sigma = if l <= f64::MIN_POSITIVE { 0.0 } else { det / l };
+        let short = (TARGET - sigma).max(0.0);
+        short * short + INVERTED_WEIGHT * (-det / volume).max(0.0)
+    };
+    let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
+    let mut total = term(
+        sum([1, 2, 5, 6]) - sum([0, 3, 4, 7]),
+        sum([2, 3, 6, 7]) - sum([0, 1, 4, 5]),
+        sum([4, 5, 6, 7]) - sum([0, 1, 2, 3]),
+        volume * 64.0,
+    );
+    for (i, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
+        total += term(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i], volume);
+    }
+    total
+}
+
+/// Minimises the summed penalty of `elements` over the nodes whose `freedom` is not
+/// [`Freedom::Fixed`] (nodes beyond `freedom`'s length are fixed). Sequential, in node order,
+/// so the result does not depend on the thread count.
+pub fn optimise_nodes(nodes: &mut [Point3<f64>], elements: &[Hex], freedom: &[Freedom], surface: &LumenSurface) {
+    let is_free = |n: u32| freedom.get(n as usize).is_some_and(|f| *f != Freedom::Fixed);
+    let mut incident: Vec<Vec<u32>> = vec![Vec::new(); freedom.len()];
+    for (e, h) in elements.iter().enumerate() {
+        for &n in h {
+            if is_free(n) && incident[n as usize].last() != Some(&(e as u32)) {
+                incident[n as usize].push(e as u32);
+            }
+        }
+    }
+    let free: Vec<u32> = (0..freedom.len() as u32).filter(|&n| !incident[n as usize].is_empty()).collect();
+    if free.is_empty() {
+        return;
+    }
+    // Each element's size: its mean edge length as it was.
+    let mut size = vec![0.0; elements.len()];
+    for &n in &free {
+        for &e in &incident[n as usize] {
+            if size[e as usize] == 0.0 {
+                let h = &elements[e as usize];
+                size[e as usize] = crate::mesh::HEX_EDGES
+                    .iter()
+                    .map(|&[a, b]| (nodes[h[a] as usize] - nodes[h[b] as usize]).norm())
+                    .sum::<f64>()
+                    / 12.0;
+            }
+        }
+    }
+    let local = |nodes: &[Point3<f64>], n: u32| -> f64 {
+        incident[n as usize]
+            .iter()
+            .map(|&e| element_penalty(&elements[e as usize].map(|m| nodes[m as usize]), size[e as usize]))
+            .sum()
+    };
+    // The shortest edge at each free node, from the start (the step's scale).
+    let scale: Vec<f64> = free.iter().map(|&n| shortest_edge(nodes, elements, &incident[n as usize], n)).collect();
+    // A node is visited while it or a node of its elements moved in the sweep before (at first,
+    // every node): otherwise its objective and gradient are the same as when it last stayed.
+    let mut active = vec![false; freedom.len()];
+    for &n in &free {
+        active[n as usize] = true;
+    }
+    for _ in 0..MAX_SWEEPS {
+        let (mut before, mut after) = (0.0, 0.0);
+        let mut next = vec![false; freedom.len()];
+        for (&n, &h) in free.iter().zip(&scale) {
+            if !active[n as usize] {
+                continue;
+            }
+            let f0 = local(nodes, n);
+            before += f0;
+            let f =
+                if f0 > 0.0 && h > 0.0 { descend(nodes, n, h, f0, freedom[n as usize], &local, surface) } else { f0 };
+            after += f;
+            if f < f0 {
+                for &e in &incident[n as usize] {
+                    for &m in &elements[e as usize] {
+                        if is_free(m) {
+                            next[m as usize] = true;
+                        }
+                    }
+                }
+            }
+        }
+        active = next;
+        if before == 0.0 || before - after <= STALLED_SHARE * before {
+            break;
+        }
+    }
+}
+
+/// One steepest-descent step of node `n` (objective `f0` where it is, `h` its scale), its
+/// gradient by forward differences, backtracking until the objective falls; the objective
+/// after it (`f0` when the node stays).
+fn descend(
+    nodes: &mut [Point3<f64>],
+    n: u32,
+    h: f64,
+    f0: f64,
+    freedom: Freedom,
+    local: &impl Fn(&[Point3<f64>], u32) -> f64,
+    surface: &LumenSurface,
+) -> f64 {
+    let old = nodes[n as usize];
+    let d = GRADIENT_STEP * h;
+    let mut gradient = Vector3::zeros();
+    for axis in 0..3 {
+        nodes[n as usize] = old;
+        nodes[n as usize][axis] += d;
+        gradient[axis] = (local(nodes, n) - f0) / d;
+    }
+    nodes[n as usize] = old;
+    let direction = match freedom {
+        Freedom::Across(g) => -(gradient - g * gradient.dot(&g)),
+        _ => -gradient,
+    };
+    let norm = direction.norm();
+    if norm.is_nan() || norm <= 0.0 {
+        return f0;
+    }
+    let mut step = MAX_STEP * h / norm;
+    for _ in 0..=BACKTRACKS {
+        let p = old + direction * step;
+        nodes[n as usize] = match freedom {
+            Freedom::OnSurface => surface.closest(&p).point,
+            _ => p,
+        };
+        let f = local(nodes, n);
+        if f < f0 {
+            return f;
+        }
+        step *= 0.5;
+    }
+    nodes[n as usize] = old;
+    f0
+}
+
+/// The shortest edge of the given elements that meets node `n`.
+fn shortest_edge(nodes: &[Point3<f64>], elements: &[Hex], incident: &[u32], n: u32) -> f64 {
+    let mut shortest = f64::INFINITY;
+    for &e in incident {
+        let h = &elements[e as usize];
+        if let Some(c) = h.iter().position(|&m| m == n) {
+            for &nb in &HEX_CORNER_NEIGHBOURS[c] {
+                shortest = shortest.min((nodes[h[nb] as usize] - nodes[n as usize]).norm());
+            }
+        }
+    }
+    if shortest.is_finite() {
+        shortest
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::quality::scaled_jacobian;
+
+    /// A surface the tests' nodes never slide on.
+    fn surface() -> LumenSurface {
+        LumenSurface::new(&crate::testing::straight_tube_surface(1.0, 1.0, 8, 2)).expect("a tube")
+    }
+
+    fn unit_cube(offset: Vector3<f64>) -> [Point3<f64>; 8] {
+        [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [0.0, 1.0, 1.0],
+        ]
+        .map(|p| Point3::from(Vector3::from(p) + offset))
+    }
+
+    #[test]
+    fn a_cube_costs_nothing_and_an_inverted_corner_costs_most() {
+        let cube = unit_cube(Vector3::zeros());
+        assert_eq!(element_penalty(&cube, 1.0), 0.0);
+        let mut folded = cube;
+        folded[6] = Point3::new(0.2, 0.2, 0.2);
+        assert!(scaled_jacobian(&folded) < 0.0);
+        let mut sheared = cube;
+        sheared[6] = Point3::new(1.6, 1.6, 1.0);
+        assert!(scaled_jacobian(&sheared) > 0.0);
+        assert!(element_penalty(&folded, 1.0) > element_penalty(&sheared, 1.0));
+    }
+
+    /// Two cubes side by side share a face; its four nodes are pushed through the far cube's
+    /// opposite face, inverting both. Free, the shared nodes go back between the two.
+    #[test]
+    fn free_nodes_untangle_two_inverted_cubes() {
+        let a = unit_cube(Vector3::zeros());
+        let b = unit_cube(Vector3::x());
+        // Nodes 0..8 of a, and b's x = 2 face as nodes 8..12; b shares a's x = 1 face.
+        let mut nodes: Vec<Point3<f64>> = a.to_vec();
+        nodes.extend([b[1], b[2], b[5], b[6]]);
+        let hexes: Vec<Hex> = vec![[0, 1, 2, 3, 4, 5, 6, 7], [1, 8, 9, 2, 5, 10, 11, 6]];
+        for n in [1usize, 2, 5, 6] {
+            nodes[n].x = 2.6;
+        }
+        let corners = |nodes: &[Point3<f64>], h: &Hex| h.map(|n| nodes[n as usize]);
+        assert!(hexes.iter().any(|h| scaled_jacobian(&corners(&nodes, h)) < 0.0));
+        let mut freedom = vec![Freedom::Fixed; nodes.len()];
+        for n in [1usize, 2, 5, 6] {
+            freedom[n] = Freedom::Free;
+        }
+        let surface = surface();
+        optimise_nodes(&mut nodes, &hexes, &freedom, &surface);
+        for h in &hexes {
+            assert!(scaled_jacobian(&corners(&nodes, h)) > TARGET, "{:?}", corners(&nodes, h));
+        }
+    }
+
+    /// A node that may only move across a direction keeps its place along it.
+    #[test]
+    fn a_node_moving_across_a_direction_keeps_its_height() {
+        let mut nodes = unit_cube(Vector3::zeros()).to_vec();
+        nodes[6] = Point3::new(2.2, -0.2, 1.0);
+        let hexes: Vec<Hex> = vec![[0, 1, 2, 3, 4, 5, 6, 7]];
+        let mut freedom = vec![Freedom::Fixed; 8];
+        freedom[6] = Freedom::Across(Vector3::z());
+        let surface = surface();
+        let before = scaled_jacobian(&hexes[0].map(|n| nodes[n as usize]));
+        assert!(before < TARGET, "{before}");
+        optimise_nodes(&mut nodes, &hexes, &freedom, &surface);
+        assert_eq!(nodes[6].z, 1.0);
+        let after = scaled_jacobian(&hexes[0].map(|n| nodes[n as usize]));
+        assert!(after > before, "{before} -> {after} at {:?}", nodes[6]);
+    }
+}
