@@ -663,11 +663,7 @@ pub fn mesh_tree(
     // search already takes past the target: a crotch face's area shrank by 24 % under pressure).
     if !junctions.is_empty() && short_of_bars(&built) {
         let pages: Vec<_> = [false, true]
-            .map(|pattern_search| JunctionOptimisation {
-                slide_surface_nodes: true,
-                pattern_search,
-                move_pages: true,
-            })
+            .map(|pattern_search| JunctionOptimisation { slide_surface_nodes: true, pattern_search, move_pages: true })
             .to_vec();
         keep(build_all(&pages, &walls), &mut built);
     }

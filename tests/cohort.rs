@@ -10,12 +10,10 @@ mod common;
 
 use common::*;
 use nalgebra::Point3;
-use std::path::Path;
 use std::time::Instant;
 use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions};
 use vesselhex::input::{clean_surface, read_centerlines, read_surface, topology, CenterlinePolyline, TriangleSurface};
 use vesselhex::surface::LumenSurface;
-use vesselhex::units::LengthUnit;
 
 /// The centerline each case ships, where it has one.
 const REFERENCES: [(&str, &str); 6] = [
@@ -31,34 +29,6 @@ const REFERENCES: [(&str, &str); 6] = [
 /// issue's bar: median distance 2 % and 95th percentile 10 % of the radius. (The others were
 /// computed on a smoothed surface or another reconstruction; their figures are printed.)
 const SAME_SURFACE_REFERENCES: [&str; 2] = ["vmtk_aortoiliac", "simvascular_demo_aortoiliac"];
-
-struct Case {
-    name: String,
-    surface: String,
-    unit: LengthUnit,
-    ends: usize,
-}
-
-fn manifest(vessels: &Path) -> Vec<Case> {
-    let text = std::fs::read_to_string(vessels.join("manifest.json")).expect("manifest.json");
-    let json: serde_json::Value = serde_json::from_str(&text).expect("manifest.json is JSON");
-    json["cases"]
-        .as_array()
-        .expect("manifest cases")
-        .iter()
-        .map(|c| {
-            let unit = c["unit"].as_str().unwrap();
-            // "unitless (treat as m)": the manifest's own advice.
-            let unit = if unit.starts_with("unitless") { "m" } else { unit };
-            Case {
-                name: c["name"].as_str().unwrap().to_string(),
-                surface: c["primary_surface"].as_str().unwrap().to_string(),
-                unit: unit.parse().unwrap_or_else(|e| panic!("{}: unit {unit}: {e}", c["name"])),
-                ends: c["ends"].as_u64().unwrap() as usize,
-            }
-        })
-        .collect()
-}
 
 /// Distance from `p` to the polylines (mm).
 fn to_polylines(p: &Point3<f64>, lines: &[CenterlinePolyline]) -> f64 {

@@ -430,3 +430,35 @@ pub fn assert_lumen_opens(case: &str, mesh: &VesselMesh, disp: &Displacements) {
     assert!(median > 1.0, "{case}: the lumen surface does not stretch");
     assert!(least > 0.9 && most < 1.5, "{case}: lumen face area stretch from {least:.3} to {most:.3}");
 }
+
+/// A case of `../shared/vessels/manifest.json`.
+pub struct Case {
+    pub name: String,
+    /// The file name of its surface in its folder.
+    pub surface: String,
+    pub unit: LengthUnit,
+    /// Its true number of vessel ends.
+    pub ends: usize,
+}
+
+/// Every case of the manifest, in its order.
+pub fn manifest(vessels: &Path) -> Vec<Case> {
+    let text = std::fs::read_to_string(vessels.join("manifest.json")).expect("manifest.json");
+    let json: serde_json::Value = serde_json::from_str(&text).expect("manifest.json is JSON");
+    json["cases"]
+        .as_array()
+        .expect("manifest cases")
+        .iter()
+        .map(|c| {
+            let unit = c["unit"].as_str().unwrap();
+            // "unitless (treat as m)": the manifest's own advice.
+            let unit = if unit.starts_with("unitless") { "m" } else { unit };
+            Case {
+                name: c["name"].as_str().unwrap().to_string(),
+                surface: c["primary_surface"].as_str().unwrap().to_string(),
+                unit: unit.parse().unwrap_or_else(|e| panic!("{}: unit {unit}: {e}", c["name"])),
+                ends: c["ends"].as_u64().unwrap() as usize,
+            }
+        })
+        .collect()
+}
