@@ -13,7 +13,8 @@ use common::*;
 use std::time::Instant;
 
 /// The cases meshed within every bar (minimum scaled Jacobian 0.2, wall mean 0.85, lumen skew
-/// 0.35) at both presets; a change that loses one fails here.
+/// 0.35) at both presets, and those at the coarse one only; a change that loses one fails here.
+const WITHIN_BARS_AT_COARSE: [&str; 1] = ["openlb_cerebral_aneurysm_tree"];
 const WITHIN_BARS: [&str; 13] = [
     "vmtk_aortoiliac",
     "vmtk_abdominal_aorta_segment",
@@ -43,6 +44,8 @@ fn cohort_at(preset: &str) {
         "case", "hexes", "min SJ", "wall", "skew", "ends", "s"
     );
     let mut failures = vec![];
+    let expected_within =
+        |name: &str| WITHIN_BARS.contains(&name) || (preset == "coarse" && WITHIN_BARS_AT_COARSE.contains(&name));
     for case in &cases {
         let surface = vessels.join(&case.name).join(&case.surface);
         assert!(surface.exists(), "{}: {} is missing", case.name, surface.display());
@@ -57,7 +60,7 @@ fn cohort_at(preset: &str) {
             // A refusal: one line, naming the surface.
             let error = stderr.lines().find(|l| l.starts_with("vesselhex: error:")).unwrap_or_default();
             println!("{preset}: {:<32} {:>53.1}  refused: {}", case.name, seconds, error);
-            if !error.contains(&case.surface) || WITHIN_BARS.contains(&case.name.as_str()) {
+            if !error.contains(&case.surface) || expected_within(&case.name) {
                 failures.push(format!("{}: {error}", case.name));
             }
             continue;
@@ -90,7 +93,7 @@ fn cohort_at(preset: &str) {
                 "interface nodes off the surface".to_string(),
             ),
             (within == bars_hold, format!("within_bars is {within} for these figures")),
-            (within || !WITHIN_BARS.contains(&case.name.as_str()), "no longer within the bars".to_string()),
+            (within || !expected_within(&case.name), "no longer within the bars".to_string()),
         ];
         failures.extend(checks.into_iter().filter(|c| !c.0).map(|c| format!("{}: {}", case.name, c.1)));
     }
