@@ -989,6 +989,7 @@ fn build_report(
     let bars = bar_warnings(mesh);
     let within_bars = bars.is_empty();
     warnings.extend(bars);
+    warnings.extend(meshed.accuracy.unmeshed_warning().map(|w| Warning::new("surface_not_meshed", w)));
     Report {
         vesselhex_version: env!("CARGO_PKG_VERSION"),
         length_unit: unit,

@@ -3,8 +3,8 @@
 //! with no hint, at the coarse and the medium preset. Prints a table (hexes, minimum scaled
 //! Jacobian, wall mean, lumen skew, ends meshed, seconds) and asserts what every case must give:
 //! a mesh with no inverted element whose every end is meshed and whose interface nodes lie on
-//! the surface, within the bars as `report.json` says, or else a one-line refusal naming the
-//! surface. The cases that mesh within every bar today ([`WITHIN_BARS`]) must go on doing so.
+//! the surface, within the bars as `report.json` says, warning where part of the surface is left
+//! out, or else a one-line refusal naming the surface. The cases that mesh within every bar today ([`WITHIN_BARS`]) must go on doing so.
 //! Under CI a missing folder or case is a failure.
 
 mod common;
@@ -30,6 +30,10 @@ const WITHIN_BARS: [&str; 13] = [
     "aneupy_aaa",
     "medlib_voxel_aorta",
 ];
+
+/// The cases whose mesh leaves part of the surface out, said by a `surface_not_meshed` warning:
+/// the saccular aneurysm beside its artery (its sac is not a branch of the centerline tree).
+const SURFACE_LEFT_OUT: [&str; 1] = ["gmsh_cerebral_aneurysm"];
 
 /// Interface nodes must lie on the lumen surface to this (um).
 const ON_SURFACE_UM: f64 = 1.0;
@@ -85,6 +89,7 @@ fn cohort_at(preset: &str) {
             if within { "within the bars" } else { "below a bar" }
         );
         let bars_hold = min_sj >= 0.2 && wall_mean >= 0.85 && skew <= 0.35;
+        let left_out = report["warnings"].as_array().unwrap().iter().any(|w| w["kind"] == "surface_not_meshed");
         let checks = [
             (min_sj > 0.0, format!("an inverted element (min scaled Jacobian {min_sj:.3})")),
             (meshed == ends.len() && ends.len() >= case.ends, format!("{meshed} of {} ends meshed", ends.len())),
@@ -94,6 +99,10 @@ fn cohort_at(preset: &str) {
             ),
             (within == bars_hold, format!("within_bars is {within} for these figures")),
             (within || !expected_within(&case.name), "no longer within the bars".to_string()),
+            (
+                left_out == SURFACE_LEFT_OUT.contains(&case.name.as_str()),
+                format!("surface_not_meshed warned: {left_out}"),
+            ),
         ];
         failures.extend(checks.into_iter().filter(|c| !c.0).map(|c| format!("{}: {}", case.name, c.1)));
     }
