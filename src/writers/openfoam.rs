@@ -967,8 +967,18 @@ fn prefixed(folder: &str, paths: Vec<PathBuf>) -> Vec<PathBuf> {
 
 /// Writes the lumen case into `dir/openfoam/`.
 pub fn write_openfoam(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
-    let poly = lumen_polymesh(mesh)?;
-    write_case(&poly, &EndNames::of(mesh)?, options, &dir.join("openfoam")).map(|p| prefixed("openfoam", p))
+    write_openfoam_of(mesh, &lumen_polymesh(mesh)?, options, dir)
+}
+
+/// [`write_openfoam`] with the lumen polyMesh of `mesh` already built ([`lumen_polymesh`]): a run
+/// that writes several of the formats derived from it builds it once.
+pub fn write_openfoam_of(
+    mesh: &VesselMesh,
+    lumen: &PolyMesh,
+    options: &WriteOptions,
+    dir: &Path,
+) -> Result<Vec<PathBuf>> {
+    write_case(lumen, &EndNames::of(mesh)?, options, &dir.join("openfoam")).map(|p| prefixed("openfoam", p))
 }
 
 /// Writes a case for an already built lumen polyMesh with the end patches `ends` into `case`
@@ -987,8 +997,20 @@ pub fn write_case(poly: &PolyMesh, ends: &EndNames, options: &WriteOptions, case
 /// Writes lumen + wall in one polyMesh into `dir/openfoam-fsi/`, with the system files that
 /// OpenFOAM utilities need, `constant/polyMesh/fluidSolidZones` and an `Allrun` that splits the regions.
 pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
-    // The lumen's polyMesh gives the system files' values; it is gone before the whole one is built.
-    let vars = case_vars(&lumen_polymesh(mesh)?, &EndNames::of(mesh)?, &options.openfoam)?;
+    write_openfoam_fsi_of(mesh, lumen_polymesh(mesh)?, options, dir)
+}
+
+/// [`write_openfoam_fsi`] with the lumen polyMesh of `mesh` already built ([`lumen_polymesh`]).
+/// It gives the system files' values and is dropped before the whole polyMesh is built, so the
+/// two are never held together.
+pub fn write_openfoam_fsi_of(
+    mesh: &VesselMesh,
+    lumen: PolyMesh,
+    options: &WriteOptions,
+    dir: &Path,
+) -> Result<Vec<PathBuf>> {
+    let vars = case_vars(&lumen, &EndNames::of(mesh)?, &options.openfoam)?;
+    drop(lumen);
     let poly = fsi_polymesh(mesh)?;
     let case = dir.join("openfoam-fsi");
     let mut out = write_polymesh(&poly, options.openfoam.binary, &case)?;
