@@ -997,27 +997,40 @@ pub fn write_case(poly: &PolyMesh, ends: &EndNames, options: &WriteOptions, case
 /// Writes lumen + wall in one polyMesh into `dir/openfoam-fsi/`, with the system files that
 /// OpenFOAM utilities need, `constant/polyMesh/fluidSolidZones` and an `Allrun` that splits the regions.
 pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
-    write_openfoam_fsi_of(mesh, lumen_polymesh(mesh)?, options, dir)
+    // The lumen's polyMesh is gone before the whole one is built.
+    let values = FsiSystemValues::of(mesh, &lumen_polymesh(mesh)?, options)?;
+    let mut out = write_openfoam_fsi_mesh(mesh, options, dir)?;
+    out.extend(write_openfoam_fsi_system(mesh, &values, dir)?);
+    Ok(out)
 }
 
-/// [`write_openfoam_fsi`] with the lumen polyMesh of `mesh` already built ([`lumen_polymesh`]).
-/// It gives the system files' values and is dropped before the whole polyMesh is built, so the
-/// two are never held together.
-pub fn write_openfoam_fsi_of(
-    mesh: &VesselMesh,
-    lumen: PolyMesh,
-    options: &WriteOptions,
-    dir: &Path,
-) -> Result<Vec<PathBuf>> {
-    let vars = case_vars(&lumen, &EndNames::of(mesh)?, &options.openfoam)?;
-    drop(lumen);
-    let poly = fsi_polymesh(mesh)?;
-    let case = dir.join("openfoam-fsi");
-    let mut out = write_polymesh(&poly, options.openfoam.binary, &case)?;
-    for (rel, text) in TEMPLATES.iter().filter(|(rel, _)| rel.starts_with("system/")) {
-        out.push(write_text(&case, rel, &render(rel, text, &vars)?, false)?);
+/// The values of the `openfoam-fsi` system files and `Allrun`: those of the flow case, from the
+/// lumen's polyMesh, which a run writing the flow case too builds once.
+pub struct FsiSystemValues(Vec<(&'static str, String)>);
+
+impl FsiSystemValues {
+    /// The values for `mesh`, whose lumen polyMesh is `lumen` ([`lumen_polymesh`]).
+    pub fn of(mesh: &VesselMesh, lumen: &PolyMesh, options: &WriteOptions) -> Result<Self> {
+        case_vars(lumen, &EndNames::of(mesh)?, &options.openfoam).map(FsiSystemValues)
     }
-    out.push(write_text(&case, "Allrun", &render("openfoam-fsi/Allrun", FSI_ALLRUN, &vars)?, true)?);
+}
+
+/// The polyMesh of [`write_openfoam_fsi`] (`openfoam-fsi/constant/polyMesh/`), built, written
+/// and dropped: a run can write it before it builds the lumen's, never holding both.
+pub fn write_openfoam_fsi_mesh(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
+    let poly = fsi_polymesh(mesh)?;
+    write_polymesh(&poly, options.openfoam.binary, &dir.join("openfoam-fsi")).map(|p| prefixed("openfoam-fsi", p))
+}
+
+/// The rest of [`write_openfoam_fsi`]: the system files, `Allrun` and
+/// `constant/polyMesh/fluidSolidZones`.
+pub fn write_openfoam_fsi_system(mesh: &VesselMesh, values: &FsiSystemValues, dir: &Path) -> Result<Vec<PathBuf>> {
+    let (case, vars) = (dir.join("openfoam-fsi"), &values.0);
+    let mut out = Vec::new();
+    for (rel, text) in TEMPLATES.iter().filter(|(rel, _)| rel.starts_with("system/")) {
+        out.push(write_text(&case, rel, &render(rel, text, vars)?, false)?);
+    }
+    out.push(write_text(&case, "Allrun", &render("openfoam-fsi/Allrun", FSI_ALLRUN, vars)?, true)?);
     let cells = |r: Range<usize>| r.start as u32..r.end as u32;
     let fluid: Vec<u32> = cells(mesh.lumen_range()).chain(cells(mesh.extension_range())).collect();
     let zones = vec![("fluid".to_string(), fluid), ("solid".to_string(), cells(mesh.wall_range()).collect())];

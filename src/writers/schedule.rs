@@ -16,9 +16,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 
-/// The formats whose files derive from the lumen polyMesh, in the order the lumen job writes
-/// them: `openfoam-fsi` last, since it takes the lumen's polyMesh and drops it before building
-/// the whole mesh's.
+/// The formats whose files derive from the lumen polyMesh.
 const LUMEN_FORMATS: [&str; 3] = ["openfoam", "fsi", "openfoam-fsi"];
 
 /// Jobs running at once.
@@ -27,7 +25,8 @@ const THREADS: usize = 2;
 /// A job: the formats (indices into the run's list) it writes.
 enum Job {
     One(usize),
-    /// Formats of [`LUMEN_FORMATS`] getting the same mesh, in that order.
+    /// Formats of [`LUMEN_FORMATS`] getting the same mesh, written from one build of the lumen
+    /// polyMesh ([`write_lumen_formats`]).
     Lumen(Vec<usize>),
 }
 
@@ -36,7 +35,7 @@ type Written = Vec<(usize, Vec<PathBuf>)>;
 
 /// Writes `formats` under `dir`, each from the mesh `mesh_for` gives it, and returns the paths
 /// written in the order of `formats`. On a failure no new job starts; the error returned is that
-/// of the first failed job in the order of `formats`.
+/// of the failed job whose first format comes first in `formats`.
 pub fn write_formats<'m>(
     formats: &[&str],
     mesh_for: &(dyn Fn(&str) -> Cow<'m, VesselMesh> + Sync),
@@ -44,8 +43,10 @@ pub fn write_formats<'m>(
     dir: &Path,
 ) -> Result<Vec<PathBuf>> {
     let jobs = plan(formats, mesh_for);
-    let results: Mutex<Vec<(usize, Result<Written>)>> = Mutex::new(Vec::new());
+    // One thread when rayon is told to use one (RAYON_NUM_THREADS=1): the run stays serial.
+    let threads = THREADS.min(rayon::current_num_threads()).min(jobs.len()).max(1);
     let (next, failed) = (AtomicUsize::new(0), AtomicBool::new(false));
+    let results: Mutex<Vec<(usize, Result<Written>)>> = Mutex::new(Vec::new());
     let work = || {
         while !failed.load(Ordering::Relaxed) {
             let Some(job) = jobs.get(next.fetch_add(1, Ordering::Relaxed)) else { return };
@@ -54,8 +55,6 @@ pub fn write_formats<'m>(
             results.lock().expect("no writer panicked").push((first_format(job), result));
         }
     };
-    // One thread when rayon is told to use one (RAYON_NUM_THREADS=1): the run stays serial.
-    let threads = THREADS.min(rayon::current_num_threads()).min(jobs.len()).max(1);
     std::thread::scope(|s| {
         (1..threads).for_each(|_| {
             s.spawn(work);
@@ -77,19 +76,19 @@ pub fn write_formats<'m>(
 fn plan<'m>(formats: &[&str], mesh_for: &(dyn Fn(&str) -> Cow<'m, VesselMesh> + Sync)) -> Vec<Job> {
     let index = |f: &str| formats.iter().position(|x| *x == f);
     let lumen: Vec<usize> = LUMEN_FORMATS.iter().filter_map(|f| index(f)).collect();
-    let shared = match lumen.first() {
+    let shared: Vec<usize> = match lumen.first() {
         Some(&first) => {
             let mesh = mesh_for(formats[first]);
             lumen.iter().copied().filter(|&i| same_mesh(&mesh, &mesh_for(formats[i]))).collect()
         }
         None => Vec::new(),
     };
+    let shared = if shared.len() > 1 { shared } else { Vec::new() };
     let mut jobs = Vec::new();
-    if shared.len() > 1 {
+    if !shared.is_empty() {
         jobs.push(Job::Lumen(shared.clone()));
     }
-    let alone = (0..formats.len()).filter(|i| shared.len() < 2 || !shared.contains(i));
-    jobs.extend(alone.map(Job::One));
+    jobs.extend((0..formats.len()).filter(|i| !shared.contains(i)).map(Job::One));
     jobs
 }
 
@@ -121,8 +120,11 @@ fn run<'m>(
     }
 }
 
-/// Writes the lumen formats `members` (in [`LUMEN_FORMATS`] order) from one build of the lumen
-/// polyMesh.
+/// Writes the lumen formats `members` from one build of the lumen polyMesh. The polyMesh of
+/// `openfoam-fsi` goes first, built, written and dropped before the lumen's is built (the two are
+/// never held together): its build, the least parallel part of the run, overlaps the other
+/// thread's jobs, and the lists left for the end format on every core. Its system files, whose
+/// values come from the lumen's polyMesh, follow.
 fn write_lumen_formats(
     mesh: &VesselMesh,
     members: &[usize],
@@ -130,14 +132,22 @@ fn write_lumen_formats(
     options: &WriteOptions,
     dir: &Path,
 ) -> Result<Written> {
-    let mut lumen = Some(openfoam::lumen_polymesh(mesh)?);
+    let fsi_mesh = members.iter().find(|&&i| formats[i] == "openfoam-fsi");
+    let mut fsi_mesh_files = match fsi_mesh {
+        Some(_) => openfoam::write_openfoam_fsi_mesh(mesh, options, dir)?,
+        None => Vec::new(),
+    };
+    let lumen = openfoam::lumen_polymesh(mesh)?;
     let mut written = Vec::new();
     for &i in members {
-        let shared = lumen.as_ref().expect("openfoam-fsi, which takes the polyMesh, comes last");
         let files = match formats[i] {
-            "openfoam" => openfoam::write_openfoam_of(mesh, shared, options, dir)?,
-            "fsi" => fsi::write_fsi_of(mesh, shared, options, dir)?,
-            "openfoam-fsi" => openfoam::write_openfoam_fsi_of(mesh, lumen.take().expect("one"), options, dir)?,
+            "openfoam" => openfoam::write_openfoam_of(mesh, &lumen, options, dir)?,
+            "fsi" => fsi::write_fsi_of(mesh, &lumen, options, dir)?,
+            "openfoam-fsi" => {
+                let values = openfoam::FsiSystemValues::of(mesh, &lumen, options)?;
+                fsi_mesh_files.extend(openfoam::write_openfoam_fsi_system(mesh, &values, dir)?);
+                std::mem::take(&mut fsi_mesh_files)
+            }
             other => unreachable!("{other} is not a lumen format"),
         };
         written.push((i, files));
