@@ -48,7 +48,7 @@ use super::text::{write_binary, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::config::{FoamSolver, InletProfile, OpenFoamConfig};
 use crate::error::{Error, Result};
-use crate::mesh::{face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh};
+use crate::mesh::{face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh, HEX_FACES};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use std::io::Write;
@@ -308,7 +308,7 @@ fn face_partners(mesh: &VesselMesh, cells: Range<usize>) -> Result<Vec<u32>> {
                 } else {
                     let d = a[i] as usize;
                     if d != c {
-                        if let Some(g) = (0..6).find(|&g| key(d, g) == k) {
+                        if let Some(g) = face_on(&hexes[d], &q, &k) {
                             *slot = if *slot == NO_PARTNER { (d * 6 + g) as u32 } else { DEGENERATE };
                         }
                     }
@@ -327,6 +327,25 @@ fn face_partners(mesh: &VesselMesh, cells: Range<usize>) -> Result<Vec<u32>> {
         )));
     }
     Ok(partner)
+}
+
+/// The face of `hex` whose nodes are those of `q` (`key`: `q` sorted), found from the corners
+/// of `hex` among `q` as a bit mask, compared with each face's corners: one pass over the corners
+/// instead of sorting the nodes of all six faces. The faces of a degenerate element (a node
+/// twice) are compared node by node, as the mask may then name the wrong one.
+fn face_on(hex: &crate::mesh::Hex, q: &[u32; 4], key: &[u32; 4]) -> Option<usize> {
+    let sorted = |g: usize| {
+        let mut k = face_nodes(hex, g);
+        k.sort_unstable();
+        k
+    };
+    let mask = (0..8).filter(|&k| q.contains(&hex[k])).fold(0u8, |m, k| m | 1 << k);
+    match HEX_FACES.iter().position(|f| f.iter().fold(0u8, |m, &k| m | 1 << k) == mask) {
+        Some(g) if sorted(g) == *key => Some(g),
+        // Fewer than four corners on the nodes of q: no face of hex is on them.
+        _ if mask.count_ones() < 4 => None,
+        _ => (0..6).find(|&g| sorted(g) == *key),
+    }
 }
 
 /// Builds the polyMesh of the elements `cells` (contiguous) with the given patches.
