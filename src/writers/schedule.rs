@@ -78,8 +78,9 @@ fn plan<'m>(formats: &[&str], mesh_for: &(dyn Fn(&str) -> Cow<'m, VesselMesh> + 
     let lumen: Vec<usize> = LUMEN_FORMATS.iter().filter_map(|f| index(f)).collect();
     let shared: Vec<usize> = match lumen.first() {
         Some(&first) => {
+            // The same mesh: borrowed from one (a copy made for a format is another object).
             let mesh = mesh_for(formats[first]);
-            lumen.iter().copied().filter(|&i| same_mesh(&mesh, &mesh_for(formats[i]))).collect()
+            lumen.iter().copied().filter(|&i| std::ptr::eq::<VesselMesh>(&*mesh, &*mesh_for(formats[i]))).collect()
         }
         None => Vec::new(),
     };
@@ -90,11 +91,6 @@ fn plan<'m>(formats: &[&str], mesh_for: &(dyn Fn(&str) -> Cow<'m, VesselMesh> + 
     }
     jobs.extend((0..formats.len()).filter(|i| !shared.contains(i)).map(Job::One));
     jobs
-}
-
-/// Whether two meshes given to writers are the same one (borrowed from the same mesh).
-fn same_mesh(a: &Cow<VesselMesh>, b: &Cow<VesselMesh>) -> bool {
-    matches!((a, b), (Cow::Borrowed(a), Cow::Borrowed(b)) if std::ptr::eq(*a, *b))
 }
 
 fn first_format(job: &Job) -> usize {
