@@ -1144,12 +1144,8 @@ pub fn write_vessel(
     progress.stage("writing");
     output.begin_writing()?;
     let options = WriteOptions::from_config(config);
-    let mut outputs = Vec::new();
-    for f in &formats {
-        let write = writers::writer(f).expect("checked above");
-        let mesh = crate::finishing::mesh_for_format(&vessel.meshed.mesh, f, config);
-        outputs.extend(write(&mesh, &options, output.staging())?);
-    }
+    let mesh_for = |f: &str| crate::finishing::mesh_for_format(&vessel.meshed.mesh, f, config);
+    let mut outputs = writers::schedule::write_formats(&formats, &mesh_for, &options, output.staging())?;
     progress.finish();
     let mut report = vessel_report(vessel, config, &progress.timings);
     if reproducible {

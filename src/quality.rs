@@ -55,7 +55,9 @@ pub fn scaled_jacobian_unless_below(c: &[Point3<f64>; 8], floor: f64) -> f64 {
     min
 }
 
-/// Equi-angle skew of a hexahedron.
+/// Equi-angle skew of a hexahedron. The extreme angles are those of the extreme cosines (acos
+/// decreases, and is correctly rounded, so it keeps their order): two acos per element instead
+/// of 24, the same value.
 pub fn equiangle_skew(c: &[Point3<f64>; 8]) -> f64 {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for face in HEX_FACES {
@@ -64,12 +66,17 @@ pub fn equiangle_skew(c: &[Point3<f64>; 8]) -> f64 {
             let a = c[face[(k + 3) % 4]] - p;
             let b = c[face[(k + 1) % 4]] - p;
             let denom = a.norm() * b.norm();
-            let angle = if denom > 0.0 { (a.dot(&b) / denom).clamp(-1.0, 1.0).acos().to_degrees() } else { 0.0 };
-            lo = lo.min(angle);
-            hi = hi.max(angle);
+            // A degenerate corner has the angle 0, the angle of the cosine 1.
+            let cosine = if denom > 0.0 { (a.dot(&b) / denom).clamp(-1.0, 1.0) } else { 1.0 };
+            lo = lo.min(cosine);
+            hi = hi.max(cosine);
         }
     }
-    ((hi - 90.0) / 90.0).max((90.0 - lo) / 90.0).clamp(0.0, 1.0)
+    if hi < lo {
+        return 0.0; // no corner with a number: the skew of the angles' empty range, as it was
+    }
+    let (smallest, largest) = (hi.acos().to_degrees(), lo.acos().to_degrees());
+    ((largest - 90.0) / 90.0).max((90.0 - smallest) / 90.0).clamp(0.0, 1.0)
 }
 
 pub fn element_quality(c: &[Point3<f64>; 8]) -> ElementQuality {
@@ -104,6 +111,43 @@ impl Stats {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The skew from all 24 angles, as it was computed before only the extreme cosines were.
+    fn skew_of_every_angle(c: &[Point3<f64>; 8]) -> f64 {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for face in HEX_FACES {
+            for k in 0..4 {
+                let p = c[face[k]];
+                let (a, b) = (c[face[(k + 3) % 4]] - p, c[face[(k + 1) % 4]] - p);
+                let denom = a.norm() * b.norm();
+                let angle = if denom > 0.0 { (a.dot(&b) / denom).clamp(-1.0, 1.0).acos().to_degrees() } else { 0.0 };
+                lo = lo.min(angle);
+                hi = hi.max(angle);
+            }
+        }
+        ((hi - 90.0) / 90.0).max((90.0 - lo) / 90.0).clamp(0.0, 1.0)
+    }
+
+    #[test]
+    fn skew_from_the_extreme_cosines_is_the_skew_of_every_angle() {
+        let mut state = 0x9e3779b97f4a7c15u64;
+        let mut jitter = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for scale in [1e-3, 0.1, 0.4, 2.0] {
+            for _ in 0..50_000 {
+                let mut c = crate::mesh::unit_cube();
+                c.iter_mut().for_each(|p| *p += nalgebra::Vector3::new(jitter(), jitter(), jitter()) * scale);
+                assert_eq!(equiangle_skew(&c).to_bits(), skew_of_every_angle(&c).to_bits(), "{c:?}");
+            }
+        }
+        let mut c = crate::mesh::unit_cube();
+        c[1] = c[0]; // a degenerate corner
+        assert_eq!(equiangle_skew(&c).to_bits(), skew_of_every_angle(&c).to_bits());
+    }
 
     #[test]
     fn cube_is_perfect_and_scaling_does_not_matter() {

@@ -260,11 +260,16 @@ fn timing(poly: &PolyMesh, options: &WriteOptions, u_max: f64) -> (f64, f64) {
 /// Writes `fsi/` under `dir` (see the module documentation).
 pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
     options.openfoam.validate()?;
+    check_element(options)?;
+    write_fsi_of(mesh, &lumen_polymesh(mesh)?, options, dir)
+}
+
+/// The map pairs each fluid point with one corner node, and the lumping gives each face's force
+/// to its four corners (1/4 each, right for bilinear faces): a C3D20 face has four more nodes on
+/// the interface, which would get neither force nor displacement.
+fn check_element(options: &WriteOptions) -> Result<()> {
     let element = options.fe.calculix_element;
     if element.is_quadratic() {
-        // The map pairs each fluid point with one corner node, and the lumping gives each face's
-        // force to its four corners (1/4 each, right for bilinear faces): a C3D20 face has four
-        // more nodes on the interface, which would get neither force nor displacement.
         return Err(Error::Config(format!(
             "fe.calculix_element = {}: the FSI package couples the fluid points to the corner nodes of bilinear faces \
              only; quadratic elements have mid-edge nodes on the interface that the map cannot serve. Use C3D8I (the \
@@ -272,8 +277,15 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
             element.name()
         )));
     }
-    let poly = lumen_polymesh(mesh)?;
-    let map = interface_map(mesh, &poly)?;
+    Ok(())
+}
+
+/// [`write_fsi`] with the lumen polyMesh of `mesh` already built ([`lumen_polymesh`]): a run
+/// that writes the flow case too builds it once.
+pub fn write_fsi_of(mesh: &VesselMesh, poly: &PolyMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
+    options.openfoam.validate()?;
+    check_element(options)?;
+    let map = interface_map(mesh, poly)?;
     let fsi = dir.join("fsi");
     std::fs::create_dir_all(&fsi).map_err(|e| Error::io(&fsi, "cannot create the folder", e))?;
     let unit = options.length_unit;
@@ -309,9 +321,9 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
     let inlet = poly
         .patch(&ends.inlet)
         .ok_or_else(|| Error::Geometry(format!("FSI writer: no inlet patch '{}'", ends.inlet)))?;
-    let inflow = inlet_velocities(&poly, inlet, &options.openfoam);
+    let inflow = inlet_velocities(poly, inlet, &options.openfoam);
     let u_max = inflow.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
-    let (dt, end) = timing(&poly, options, u_max);
+    let (dt, end) = timing(poly, options, u_max);
     let mut u = format!("nonuniform List<vector>\n{}\n(\n", inflow.velocities.len());
     for v in &inflow.velocities {
         u.push_str(&format!("({:e} {:e} {:e})\n", v.x, v.y, v.z));
@@ -322,9 +334,9 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
         end_patches.push_str(&render(END_PIECE.0, END_PIECE.1, &[("end", end.to_string())])?);
     }
     let windows = (end / dt).round().max(1.0) as u64;
-    let (_, slabs) = slab_axis(&poly);
+    let (_, slabs) = slab_axis(poly);
     let mut vars: Vec<(&str, String)> = end_vars(&ends)?;
-    vars.extend(extension_wall_vars(&poly));
+    vars.extend(extension_wall_vars(poly));
     vars.extend([
         ("slabs_np", slabs("$np")),
         ("version", env!("CARGO_PKG_VERSION").to_string()),

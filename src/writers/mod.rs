@@ -14,6 +14,7 @@ pub mod fsi;
 pub mod inp;
 pub mod material;
 pub mod openfoam;
+pub mod schedule;
 pub mod template;
 pub mod text;
 pub mod vtu;

@@ -48,7 +48,7 @@ use super::text::{write_binary, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::config::{FoamSolver, InletProfile, OpenFoamConfig};
 use crate::error::{Error, Result};
-use crate::mesh::{face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh};
+use crate::mesh::{face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh, HEX_FACES};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use std::io::Write;
@@ -308,7 +308,7 @@ fn face_partners(mesh: &VesselMesh, cells: Range<usize>) -> Result<Vec<u32>> {
                 } else {
                     let d = a[i] as usize;
                     if d != c {
-                        if let Some(g) = (0..6).find(|&g| key(d, g) == k) {
+                        if let Some(g) = face_on(&hexes[d], &q, &k) {
                             *slot = if *slot == NO_PARTNER { (d * 6 + g) as u32 } else { DEGENERATE };
                         }
                     }
@@ -327,6 +327,25 @@ fn face_partners(mesh: &VesselMesh, cells: Range<usize>) -> Result<Vec<u32>> {
         )));
     }
     Ok(partner)
+}
+
+/// The face of `hex` whose nodes are those of `q` (`key`: `q` sorted), found from the corners
+/// of `hex` among `q` as a bit mask, compared with each face's corners: one pass over the corners
+/// instead of sorting the nodes of all six faces. The faces of a degenerate element (a node
+/// twice) are compared node by node, as the mask may then name the wrong one.
+fn face_on(hex: &crate::mesh::Hex, q: &[u32; 4], key: &[u32; 4]) -> Option<usize> {
+    let sorted = |g: usize| {
+        let mut k = face_nodes(hex, g);
+        k.sort_unstable();
+        k
+    };
+    let mask = (0..8).filter(|&k| q.contains(&hex[k])).fold(0u8, |m, k| m | 1 << k);
+    match HEX_FACES.iter().position(|f| f.iter().fold(0u8, |m, &k| m | 1 << k) == mask) {
+        Some(g) if sorted(g) == *key => Some(g),
+        // Fewer than four corners on the nodes of q: no face of hex is on them.
+        _ if mask.count_ones() < 4 => None,
+        _ => (0..6).find(|&g| sorted(g) == *key),
+    }
 }
 
 /// Builds the polyMesh of the elements `cells` (contiguous) with the given patches.
@@ -967,8 +986,18 @@ fn prefixed(folder: &str, paths: Vec<PathBuf>) -> Vec<PathBuf> {
 
 /// Writes the lumen case into `dir/openfoam/`.
 pub fn write_openfoam(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
-    let poly = lumen_polymesh(mesh)?;
-    write_case(&poly, &EndNames::of(mesh)?, options, &dir.join("openfoam")).map(|p| prefixed("openfoam", p))
+    write_openfoam_of(mesh, &lumen_polymesh(mesh)?, options, dir)
+}
+
+/// [`write_openfoam`] with the lumen polyMesh of `mesh` already built ([`lumen_polymesh`]): a run
+/// that writes several of the formats derived from it builds it once.
+pub fn write_openfoam_of(
+    mesh: &VesselMesh,
+    lumen: &PolyMesh,
+    options: &WriteOptions,
+    dir: &Path,
+) -> Result<Vec<PathBuf>> {
+    write_case(lumen, &EndNames::of(mesh)?, options, &dir.join("openfoam")).map(|p| prefixed("openfoam", p))
 }
 
 /// Writes a case for an already built lumen polyMesh with the end patches `ends` into `case`
@@ -987,15 +1016,40 @@ pub fn write_case(poly: &PolyMesh, ends: &EndNames, options: &WriteOptions, case
 /// Writes lumen + wall in one polyMesh into `dir/openfoam-fsi/`, with the system files that
 /// OpenFOAM utilities need, `constant/polyMesh/fluidSolidZones` and an `Allrun` that splits the regions.
 pub fn write_openfoam_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
-    // The lumen's polyMesh gives the system files' values; it is gone before the whole one is built.
-    let vars = case_vars(&lumen_polymesh(mesh)?, &EndNames::of(mesh)?, &options.openfoam)?;
-    let poly = fsi_polymesh(mesh)?;
-    let case = dir.join("openfoam-fsi");
-    let mut out = write_polymesh(&poly, options.openfoam.binary, &case)?;
-    for (rel, text) in TEMPLATES.iter().filter(|(rel, _)| rel.starts_with("system/")) {
-        out.push(write_text(&case, rel, &render(rel, text, &vars)?, false)?);
+    // The lumen's polyMesh is gone before the whole one is built.
+    let values = FsiSystemValues::of(mesh, &lumen_polymesh(mesh)?, options)?;
+    let mut out = write_openfoam_fsi_mesh(mesh, options, dir)?;
+    out.extend(write_openfoam_fsi_system(mesh, &values, dir)?);
+    Ok(out)
+}
+
+/// The values of the `openfoam-fsi` system files and `Allrun`: those of the flow case, from the
+/// lumen's polyMesh, which a run writing the flow case too builds once.
+pub struct FsiSystemValues(Vec<(&'static str, String)>);
+
+impl FsiSystemValues {
+    /// The values for `mesh`, whose lumen polyMesh is `lumen` ([`lumen_polymesh`]).
+    pub fn of(mesh: &VesselMesh, lumen: &PolyMesh, options: &WriteOptions) -> Result<Self> {
+        case_vars(lumen, &EndNames::of(mesh)?, &options.openfoam).map(FsiSystemValues)
     }
-    out.push(write_text(&case, "Allrun", &render("openfoam-fsi/Allrun", FSI_ALLRUN, &vars)?, true)?);
+}
+
+/// The polyMesh of [`write_openfoam_fsi`] (`openfoam-fsi/constant/polyMesh/`), built, written
+/// and dropped: a run can write it before it builds the lumen's, never holding both.
+pub fn write_openfoam_fsi_mesh(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Result<Vec<PathBuf>> {
+    let poly = fsi_polymesh(mesh)?;
+    write_polymesh(&poly, options.openfoam.binary, &dir.join("openfoam-fsi")).map(|p| prefixed("openfoam-fsi", p))
+}
+
+/// The rest of [`write_openfoam_fsi`]: the system files, `Allrun` and
+/// `constant/polyMesh/fluidSolidZones`.
+pub fn write_openfoam_fsi_system(mesh: &VesselMesh, values: &FsiSystemValues, dir: &Path) -> Result<Vec<PathBuf>> {
+    let (case, vars) = (dir.join("openfoam-fsi"), &values.0);
+    let mut out = Vec::new();
+    for (rel, text) in TEMPLATES.iter().filter(|(rel, _)| rel.starts_with("system/")) {
+        out.push(write_text(&case, rel, &render(rel, text, vars)?, false)?);
+    }
+    out.push(write_text(&case, "Allrun", &render("openfoam-fsi/Allrun", FSI_ALLRUN, vars)?, true)?);
     let cells = |r: Range<usize>| r.start as u32..r.end as u32;
     let fluid: Vec<u32> = cells(mesh.lumen_range()).chain(cells(mesh.extension_range())).collect();
     let zones = vec![("fluid".to_string(), fluid), ("solid".to_string(), cells(mesh.wall_range()).collect())];
