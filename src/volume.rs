@@ -513,11 +513,12 @@ const OPTIMISATION_SWEEPS: usize = 10;
 /// to this many sweeps (or until no node moves, or the worst element stalls): gmsh_aortic_arch's
 /// left common carotid, a fifth of its junction's radius, funnels into a fold the whole spine
 /// high; after ten sweeps its funnel is inverted at the medium preset wherever the junction is
-/// centred, after thirty it is valid. What stays below the bar is then optimised with the rest
-/// of the vessel's poor elements (`improve_poor`): eighty sweeps (before that optimiser) cost
-/// the coronary tree at medium 5 to 6 s a finish, and gave the cerebral tree at coarse 0.181
-/// where thirty give 0.271 (ten: 0.239, and the arch in cm 0.848 on its wall mean).
-const MAX_OPTIMISATION_SWEEPS: usize = 30;
+/// centred, after thirty it is valid (lumen min 0.201; at the coarse preset 0.173 -> 0.207), and
+/// from the arch's own centerlines it needs thirty-five (0.177 after thirty, 0.203 after
+/// thirty-five). With thirty, what stays below the bar is left to `improve_poor`, which raises
+/// it but leaves one face of the arch (its given centerlines, medium) past checkMesh's skewness
+/// bar (4.6 against 4; 2.3 with eighty).
+const MAX_OPTIMISATION_SWEEPS: usize = 80;
 /// Past [`OPTIMISATION_SWEEPS`], the sweeps stop when the worst element has gained less than
 /// [`STALLED_GAIN`] over the last this many: a funnel the moves cannot untangle stays inverted
 /// (on the bare arch at medium, half of the finishes tried), while one being untangled gains

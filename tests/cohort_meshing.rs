@@ -13,8 +13,7 @@ use common::*;
 use std::time::Instant;
 
 /// The cases meshed within every bar (minimum scaled Jacobian 0.2, wall mean 0.85, lumen skew
-/// 0.35) at both presets, and those at the coarse one only; a change that loses one fails here.
-const WITHIN_BARS_AT_COARSE: [&str; 1] = ["openlb_cerebral_aneurysm_tree"];
+/// 0.35) at both presets; a change that loses one fails here.
 const WITHIN_BARS: [&str; 13] = [
     "vmtk_aortoiliac",
     "vmtk_abdominal_aorta_segment",
@@ -48,8 +47,7 @@ fn cohort_at(preset: &str) {
         "case", "hexes", "min SJ", "wall", "skew", "ends", "s"
     );
     let mut failures = vec![];
-    let expected_within =
-        |name: &str| WITHIN_BARS.contains(&name) || (preset == "coarse" && WITHIN_BARS_AT_COARSE.contains(&name));
+    let expected_within = |name: &str| WITHIN_BARS.contains(&name);
     for case in &cases {
         let surface = vessels.join(&case.name).join(&case.surface);
         assert!(surface.exists(), "{}: {} is missing", case.name, surface.display());
