@@ -581,7 +581,7 @@ pub fn mesh_tree(
         branch_names: &names,
         surface: lumen_surface,
     };
-    // A junction is finished in four ways (twelve, below the target), and the best is kept (see
+    // A junction is finished in four ways (twelve, short of a bar), and the best is kept (see
     // FinishQuality), the first of equals in this order. Sliding the transitions' surface nodes
     // on the triangles frees the lumen where the inner nodes alone cannot (a small branch's
     // funnel: the synthetic Y at 45 degrees and 4:1 goes from 0.121 to 0.205), but in an acute
