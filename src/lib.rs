@@ -30,6 +30,7 @@ pub mod refinement;
 pub mod report;
 pub mod resources;
 pub mod surface;
+pub mod surface_smoothing;
 pub mod synthetic;
 pub mod synthetic_branching;
 pub mod testing;

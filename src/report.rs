@@ -70,6 +70,9 @@ pub struct JunctionReport {
     pub pattern_search: bool,
     /// Whether the pages' nodes moved in the optimisation too (tried with the pattern search).
     pub pages_moved: bool,
+    /// Whether the transitions' lumen-surface quads were smoothed on the triangles (tried when
+    /// the finishes as projected are short of a bar).
+    pub surface_smoothed: bool,
     pub elements: usize,
     pub scaled_jacobian: Stats,
     pub lumen_equiangle_skew: Stats,

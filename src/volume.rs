@@ -16,6 +16,7 @@ use crate::mesh::{
 use crate::node_optimisation::{optimise_nodes, Freedom};
 use crate::projection::{BranchEnd, ProjectedBranch};
 use crate::surface::LumenSurface;
+use crate::surface_smoothing::{smooth_on_surface, RayNode, SmoothedNode};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -124,6 +125,8 @@ pub fn build_volume(
     // How each node may move when it is near a poor element (see `improve_poor`).
     let mut poor_mobility: Vec<Freedom> = Vec::new();
     let mut branch_nodes: Vec<BranchNodes> = Vec::with_capacity(projected.len());
+    // The transitions' surface nodes (the pages' rims too), each with its ray's ring nodes.
+    let mut smoothed_columns: IndexMap<u32, Vec<RayNode>> = IndexMap::new();
     for (pb, template) in projected.iter().zip(templates) {
         let (nx, m, core_count) = (template.nx, template.ring_len(), template.core_len());
         let last = pb.sections.len() - 1;
@@ -199,6 +202,9 @@ pub fn build_volume(
                     ));
                 }
             }
+            if in_junction && !vessel_end {
+                add_columns(&mut smoothed_columns, &ids, template, sec, levels);
+            }
             stations.push(ids);
         }
         branch_nodes.push(BranchNodes { stations });
@@ -246,6 +252,17 @@ pub fn build_volume(
     }
     // Wall nodes: W levels above every lumen-surface node, in surface-node order.
     let graph = SurfaceGraph::new(&quads, nodes.len());
+    smoothed_columns.sort_keys();
+    let smoothed: Vec<SmoothedNode> = smoothed_columns
+        .into_iter()
+        .map(|(node, column)| {
+            let neighbours = graph.neighbours[graph.position[node as usize]].iter().map(|&j| graph.nodes[j]).collect();
+            SmoothedNode { node, neighbours, column }
+        })
+        .collect();
+    if optimisation.smooth_surface {
+        smooth_on_surface(&mut nodes, &smoothed, surface);
+    }
     let surface_nodes = &graph.nodes;
     let nominal: Vec<f64> = surface_nodes.iter().map(|&s| wall_thickness(node_radius[s as usize])).collect();
     // Growth direction and thickness at every surface node, from the surface as it stands.
@@ -571,6 +588,9 @@ pub struct JunctionOptimisation {
     /// triangles when `slide_surface_nodes` is set. Flat pages fold every slot across the
     /// junction's whole spine; bent ones give room to the branch that needs it.
     pub move_pages: bool,
+    /// The transitions' lumen-surface quads are smoothed on the triangles first
+    /// ([`crate::surface_smoothing`]): it lifts the wall's mean, but can lower the worst element.
+    pub smooth_surface: bool,
 }
 
 /// Raises the worst scaled Jacobian around the movable lumen nodes of junction transitions
@@ -735,6 +755,28 @@ fn improve_junction_nodes(
         }
         if moves == moves_before {
             break;
+        }
+    }
+}
+
+/// Records, for each surface node of a section, the ring nodes on its ray (once: a page's
+/// nodes are added by every branch that folds onto it).
+fn add_columns(
+    columns: &mut IndexMap<u32, Vec<RayNode>>,
+    ids: &[u32],
+    template: &SectionTemplate,
+    section: &crate::projection::ProjectedSection,
+    levels: &RadialLevels,
+) {
+    let (core, m, r_cells) = (template.core_len(), template.ring_len(), levels.lumen_cells());
+    for k in 0..m {
+        let top = ids[core + (r_cells - 1) * m + k];
+        let column = columns.entry(top).or_default();
+        if !column.is_empty() {
+            continue;
+        }
+        for (level, &share) in levels.lumen.iter().enumerate().take(r_cells).skip(1) {
+            column.push(RayNode { node: ids[core + (level - 1) * m + k], origin: section.origins[k], share });
         }
     }
 }
