@@ -1125,11 +1125,25 @@ pub fn mesh_surface(
     let mut estimate = crate::resources::estimate_mesh(&centerlines, radius, config, surface.triangles.len());
     crate::finishing::scale_estimate(&mut estimate, config);
     crate::resources::check_fits(&estimate, settings.max_memory, &centerline_source)?;
-    let mut meshed = mesh_vessel(&surface, &centerlines, config, progress).map_err(|e| name_winding(e, &surface))?;
+    let tree_config = keep_extracted_inlet(config, found_ends.as_ref());
+    let mut meshed =
+        mesh_vessel(&surface, &centerlines, &tree_config, progress).map_err(|e| name_winding(e, &surface))?;
     let limits = ReadLimits::within(settings.max_memory);
     let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress)?;
     let (ends, inlet) = found_ends.unwrap_or_else(|| tree_ends(&meshed.tree));
     Ok(MeshedVessel { meshed, surface, centerline_source, centerlines, ends, inlet, hygiene, additions, settings })
+}
+
+/// `config` with the inlet the centerline extraction chose (the largest end section, or the end
+/// `--inlet` names) as the centerline tree's, unless the configuration names one. Left to choose
+/// again, the tree would take the end with the widest vessel next to it, a daughter wider than a
+/// short trunk (sphinxsys_pulmonary_bifurcation), and report and mesh would disagree on the inlet.
+fn keep_extracted_inlet(config: &MeshConfig, found_ends: Option<&(Vec<VesselEnd>, usize)>) -> MeshConfig {
+    let mut config = config.clone();
+    if let (Some((ends, inlet)), None) = (found_ends, config.centerline.inlet_mm) {
+        config.centerline.inlet_mm = Some(ends[*inlet].centre.coords.into());
+    }
+    config
 }
 
 /// Claims the output folder for writing `config`'s formats: `inputs` (and the case file's

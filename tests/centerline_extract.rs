@@ -17,6 +17,7 @@ use std::path::Path;
 use std::time::Instant;
 use vesselhex::centerline_extract::{extract_centerlines, write_vtp, ExtractOptions, Extraction};
 use vesselhex::input::{read_centerlines, read_surface, CenterlinePolyline, TriangleSurface};
+use vesselhex::progress::Progress;
 use vesselhex::surface::LumenSurface;
 use vesselhex::units::LengthUnit;
 
@@ -345,6 +346,36 @@ fn mesh_without_centerlines_through_the_cli() {
         .min(r["wall"]["scaled_jacobian"]["min"].as_f64().unwrap());
     println!("curved.stl meshed from computed centerlines: min scaled Jacobian {min:.3}");
     assert!(min >= 0.3, "min scaled Jacobian {min}");
+}
+
+/// The mesh of a bare surface hangs from the inlet the extraction chose: `--inlet` naming a
+/// daughter of the Y makes it the first branch's start (the tree used to choose again, by the
+/// widest vessel, and rooted the mesh at the trunk while the report named the daughter).
+#[test]
+fn the_mesh_starts_at_the_inlet_the_extraction_chose() {
+    use vesselhex::centerline_extract::InletChoice;
+    use vesselhex::config::{MeshConfig, Preset};
+    use vesselhex::pipeline::{mesh_surface, CenterlineSource, MeshSettings};
+    let (y, _) = fixture("y_bifurcation");
+    let surface = read_surface(&y, LengthUnit::Mm).unwrap();
+    let daughter = Point3::new(7.57, 0.0, 13.11);
+    let options = ExtractOptions { inlet: InletChoice::Nearest(daughter), ..Default::default() };
+    let settings = MeshSettings {
+        config: MeshConfig::preset(Preset::Coarse),
+        centerline_units: None,
+        max_memory: vesselhex::resources::default_max_memory(),
+        warnings: vec![],
+    };
+    let vessel = mesh_surface(surface, CenterlineSource::Extract(options), settings, &mut Progress::new(true, 9))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let inlet = vessel.ends[vessel.inlet];
+    let start = vessel.meshed.tree.branches[0].samples[0].point;
+    println!(
+        "y_bifurcation from a daughter: first branch starts {:.3} mm from the inlet",
+        (start - inlet.centre).norm()
+    );
+    assert!((inlet.centre - daughter).norm() < 0.1, "{:?}", inlet.centre);
+    assert!((start - inlet.centre).norm() < 0.1 * inlet.radius, "{start:?}");
 }
 
 /// A fine surface (~100k triangles) still gives one clean path (its time is in `cargo bench`).

@@ -15,7 +15,7 @@ use std::time::Instant;
 use vesselhex::centerline::{CenterlineTree, Junction};
 use vesselhex::centerline_extract::{branch_split, extract_centerlines, write_vtp};
 use vesselhex::config::CenterlineConfig;
-use vesselhex::input::{read_centerlines, read_surface, CenterlinePolyline, Centerlines};
+use vesselhex::input::{clean_surface, read_centerlines, read_surface, CenterlinePolyline, Centerlines};
 use vesselhex::surface::LumenSurface;
 use vesselhex::units::LengthUnit;
 
@@ -316,6 +316,38 @@ fn extracted_paths_give_the_vmtk_tree() {
     let gap = (tree.junctions[0].centre - vmtk.junctions[0].centre).norm() / vmtk.junctions[0].radius;
     println!("vmtk_aortoiliac: our junction {gap:.3} r from VMTK's");
     assert!(gap < 0.25, "{gap}");
+}
+
+/// The pulmonary bifurcation's main artery is a trunk about one radius long closed by a blunt
+/// face (flat, with a rounded rim): its end lies on the face, and the tree keeps the trunk from it
+/// to the junction, with the two pulmonary arteries leaving there. (With the end at the inscribed
+/// ball under the face, a radius inside it, both paths parted at the inlet and the trunk was lost.)
+#[test]
+fn a_short_trunk_closed_by_a_blunt_face_is_kept() {
+    let Some(vessels) = vessels_dir() else { return };
+    let path = vessels.join("sphinxsys_pulmonary_bifurcation/PA.stl");
+    let (surface, _) = clean_surface(read_surface(&path, LengthUnit::Mm).unwrap()).unwrap();
+    let lumen = LumenSurface::new(&surface).unwrap();
+    let ours = extract_centerlines(&surface, &Default::default()).unwrap();
+    let inlet = ours.ends[ours.inlet];
+    let config = CenterlineConfig { inlet_mm: Some(inlet.centre.coords.into()), ..Default::default() };
+    let tree = build(&ours.centerlines, &config, Some(&lumen));
+    check_contract("pulmonary bifurcation, our paths", &tree);
+    let trunk = &tree.branches[0];
+    let junction = &tree.junctions[0];
+    println!(
+        "pulmonary bifurcation: inlet {:.3} mm off the surface, trunk {:.1} mm to a junction of radius {:.1} mm",
+        lumen.closest(&inlet.centre).distance,
+        trunk.length(),
+        junction.radius
+    );
+    assert_eq!(ours.ends.len(), 3);
+    // On the face, as flat as a cap is (2 % of its radius).
+    assert!(lumen.closest(&inlet.centre).distance < 0.02 * inlet.radius, "the inlet lies on its face");
+    assert_eq!((tree.branches.len(), tree.junctions.len()), (3, 1));
+    assert!((trunk.samples[0].point - inlet.centre).norm() < 0.02 * inlet.radius, "the tree starts at the inlet");
+    assert_eq!(trunk.end_junction, Some(0));
+    assert!(trunk.length() > 0.5 * junction.radius, "trunk {:.2} mm", trunk.length());
 }
 
 /// Branch-split output read back gives the same tree: on our extraction (one junction) and on

@@ -39,10 +39,11 @@ impl EndKind {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VesselEnd {
     /// Where the centerline starts or stops: the loop's length-weighted centre (VMTK's cap
-    /// centre), or for a given point the centre of the inscribed ball under it.
+    /// centre; a blunt face's too), or for a given point or a dome the centre of the inscribed
+    /// ball under it.
     pub centre: Point3<f64>,
-    /// Equivalent radius sqrt(area / pi) of the end section (for a given point: the radius of
-    /// that inscribed ball).
+    /// Equivalent radius sqrt(area / pi) of the end section (for a given point, a dome or a
+    /// blunt face: the radius of the inscribed ball under it).
     pub radius: f64,
     pub kind: EndKind,
 }

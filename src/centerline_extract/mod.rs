@@ -128,7 +128,7 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
     let mut search = EndSearch::new(surface, &mut notes)?;
     search.add_given(&options.ends)?;
     search.add_rounded();
-    search.add_blunt();
+    search.add_blunt()?;
     let EndSearch { graph, found, end_nodes, lumen, holes, .. } = search;
     if found.len() < 2 {
         return Err(Error::input(
@@ -175,6 +175,10 @@ struct EndSearch {
     holes: Vec<Hole>,
     /// Flat faces with a rounded rim, ends only where the paths leave them uncovered.
     blunt: Vec<Cap>,
+    /// The surface's triangles (wound consistently), and whether each is an end's face, left
+    /// out of the surface the radii are measured on.
+    triangles: Vec<[u32; 3]>,
+    in_cap: Vec<bool>,
 }
 
 impl EndSearch {
@@ -224,7 +228,7 @@ impl EndSearch {
         let inward = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
         let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
         let end_nodes = found.iter().map(|e| graph.add_end(Ball { centre: e.centre, radius: e.radius })).collect();
-        Ok(EndSearch { graph, found, end_nodes, lumen, inward, holes, blunt })
+        Ok(EndSearch { graph, found, end_nodes, lumen, inward, holes, blunt, triangles, in_cap })
     }
 
     /// The points given (`--ends`) that name no end found: the inscribed balls under them.
@@ -254,10 +258,18 @@ impl EndSearch {
 
     /// Blunt ends: a flat face with a rounded rim that the paths to every other end leave
     /// beyond their balls (a short, wide vessel whose tip the rounded-end search does not take
-    /// for a vessel); a flat patch of a wall lies against those balls. Its faces stay in the
-    /// surface the radii are measured on: the mesh stops short of it.
-    fn add_blunt(&mut self) {
+    /// for a vessel); a flat patch of a wall lies against those balls.
+    ///
+    /// The end is the face's centre, as a cut cap's, with the radius of the inscribed ball under
+    /// the face (the vessel's: the face stops short of the wall at its rounded rim). The inscribed
+    /// ball itself lies a vessel radius inside the face, and a short trunk's ball reaches its
+    /// branches (sphinxsys_pulmonary_bifurcation: the inlet's ball, radius 15.8 mm, lies 16 mm
+    /// inside the face, where the paths to both outlets part), so the centerline must run on to the
+    /// face. Like a cut cap's, the face is then left out of the surface the radii are measured on:
+    /// the radius there is the rim's distance, not nothing.
+    fn add_blunt(&mut self) -> Result<()> {
         let covered = paths_between(&self.graph, &self.end_nodes);
+        let mut taken = false;
         for cap in std::mem::take(&mut self.blunt) {
             let gap = covered
                 .iter()
@@ -268,13 +280,19 @@ impl EndSearch {
             let near =
                 |e: &VesselEnd| (e.centre - cap.end.centre).norm() < BLUNT_SAME_END * e.radius.max(cap.end.radius);
             if beyond && !self.found.iter().any(near) {
-                // Like a dome's, the end is the inscribed ball under the face: the face stays in
-                // the surface, so a path to the face itself would narrow to nothing there.
-                let ball = self.graph.pole(&cap.end.centre, 0.5 * cap.end.radius);
-                self.end_nodes.push(self.graph.add_end(ball));
-                self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: cap.end.kind });
+                let vessel = self.graph.pole(&cap.end.centre, 0.5 * cap.end.radius).radius;
+                let end = VesselEnd { radius: vessel, ..cap.end };
+                self.end_nodes.push(self.graph.add_end(Ball { centre: end.centre, radius: end.radius }));
+                self.found.push(end);
+                cap.triangles.iter().for_each(|&t| self.in_cap[t as usize] = true);
+                taken = true;
             }
         }
+        if taken {
+            let open = self.triangles.iter().zip(&self.in_cap).filter(|(_, c)| !**c).map(|(t, _)| *t).collect();
+            self.lumen = LumenSurface::from_parts(self.lumen.vertices.clone(), open, self.lumen.source.clone())?;
+        }
+        Ok(())
     }
 }
 
