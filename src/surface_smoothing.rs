@@ -68,29 +68,32 @@ pub fn smooth_on_surface(nodes: &mut [Point3<f64>], smoothed: &[SmoothedNode], s
 mod tests {
     use super::*;
 
-    /// Rings of `around` nodes on a tube of radius 1 along z, `rings` of them one apart, with a
-    /// column of one ring node at half the radius under each; returns the nodes, the surface
-    /// node of (ring, k) and its column node.
-    fn tube_grid(around: usize, rings: usize) -> (Vec<Point3<f64>>, impl Fn(usize, usize) -> (u32, u32)) {
+    /// Rings of 16 nodes on a tube of radius 1 along z, one apart, each with a column node at
+    /// half the radius under it, interleaved: surface node then column node.
+    const AROUND: usize = 16;
+    fn tube_grid(rings: usize) -> Vec<Point3<f64>> {
         let mut nodes = Vec::new();
         for j in 0..rings {
-            for k in 0..around {
-                let a = std::f64::consts::TAU * k as f64 / around as f64;
+            for k in 0..AROUND {
+                let a = std::f64::consts::TAU * k as f64 / AROUND as f64;
                 nodes.push(Point3::new(a.cos(), a.sin(), j as f64));
                 nodes.push(Point3::new(0.5 * a.cos(), 0.5 * a.sin(), j as f64));
             }
         }
-        (nodes, move |j: usize, k: usize| {
-            let i = 2 * (j * around + k % around);
-            (i as u32, i as u32 + 1)
-        })
+        nodes
+    }
+
+    /// The surface node of ring j at k (any k, modulo the ring) and its column node.
+    fn at(j: usize, k: usize) -> (u32, u32) {
+        let i = 2 * (j * AROUND + k % AROUND);
+        (i as u32, i as u32 + 1)
     }
 
     #[test]
     fn a_shifted_node_returns_between_its_neighbours_on_the_surface_and_its_column_follows() {
-        let (around, rings) = (16, 5);
+        let around = AROUND;
         let surface = LumenSurface::new(&crate::testing::straight_tube_surface(1.0, 4.0, 256, 8)).expect("a tube");
-        let (mut nodes, at) = tube_grid(around, rings);
+        let mut nodes = tube_grid(5);
         for p in nodes.iter_mut().step_by(2) {
             *p = surface.closest(p).point;
         }
