@@ -652,9 +652,9 @@ pub fn mesh_tree(
     // Short of a bar, the same finishes on the transitions' surface quads smoothed first: the
     // wall's mean rises (gmsh_aortic_arch at coarse: 0.80-0.83 after round 1, 0.870 with this
     // one, within the bars where all three rounds were needed, and all three merged centres for
-    // the arch in cm), but the worst element can fall (the synthetic Y at 90 degrees and 1:1, within the bars
-    // either way: 0.50 -> 0.23), so a finish as projected that meets the bars is kept. The later
-    // rounds smooth too.
+    // the arch in cm), but the worst element can fall (the synthetic Y at 90 degrees and 1:1,
+    // within the bars either way: 0.50 -> 0.23), so a finish as projected that meets the bars
+    // is kept. The later rounds smooth too.
     let smoothed = |o: &JunctionOptimisation| JunctionOptimisation { smooth_surface: true, ..*o };
     if !junctions.is_empty() && short_of_bars(&built) {
         keep(build_all(&optimisations.iter().map(smoothed).collect::<Vec<_>>(), &walls), &mut built);

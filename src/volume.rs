@@ -252,15 +252,16 @@ pub fn build_volume(
     }
     // Wall nodes: W levels above every lumen-surface node, in surface-node order.
     let graph = SurfaceGraph::new(&quads, nodes.len());
-    smoothed_columns.sort_keys();
-    let smoothed: Vec<SmoothedNode> = smoothed_columns
-        .into_iter()
-        .map(|(node, column)| {
-            let neighbours = graph.neighbours[graph.position[node as usize]].iter().map(|&j| graph.nodes[j]).collect();
-            SmoothedNode { node, neighbours, column }
-        })
-        .collect();
     if optimisation.smooth_surface {
+        // In node order, so the Gauss-Seidel passes do not depend on the branches' order.
+        smoothed_columns.sort_keys();
+        let smoothed: Vec<SmoothedNode> = smoothed_columns
+            .into_iter()
+            .map(|(node, column)| {
+                let around = &graph.neighbours[graph.position[node as usize]];
+                SmoothedNode { node, neighbours: around.iter().map(|&j| graph.nodes[j]).collect(), column }
+            })
+            .collect();
         smooth_on_surface(&mut nodes, &smoothed, surface);
     }
     let surface_nodes = &graph.nodes;
