@@ -944,8 +944,8 @@ fn ends_not_meshed(ends: &[EndReport], unit: LengthUnit) -> Vec<Warning> {
 /// A vessel end whose mesh stops more than this many radii short of it (the vessel's radius at
 /// the mesh's end section) leaves a stretch of the vessel out. Across the cohort, at coarse and
 /// medium, the open ends' meshes stop within 0.72 radii of them, the closed ends' within 1.98
-/// (a cap's rays and the margin kept from it); the pulmonary bifurcation's obliquely cut left
-/// artery stops 2.47 radii short (33 mm), the voxel aorta's irregular closed outlet 2.92 (50 mm).
+/// (a cap's rays and the margin kept from it); the voxel aorta's irregular closed outlet stops
+/// 2.92 radii short (50 mm).
 const END_CUT_SHORT_RADII: f64 = 2.25;
 
 /// One warning per vessel end whose mesh stops well short of it (see [`END_CUT_SHORT_RADII`],

@@ -6,10 +6,7 @@
 //! would). The mesh runs between the first and the last clean sections, a margin away from a
 //! closed end, so no lumen node lands on a cap or beyond an open end; every section in between
 //! must at least be *valid* (every ray hits from the inside), otherwise the run stops with the
-//! place and the cause. A branch from a junction to a vessel end too near it for a stretch of
-//! ordinary sections (a short trunk, an end cut obliquely) is a *stub*: one ordinary section,
-//! where the junction's transition ends or, nearer the junction, at the end's clean section
-//! nearest there, and the transition from it to the junction.
+//! place and the cause.
 
 use crate::blocks::SectionTemplate;
 use crate::centerline::{Branch, CenterlineSample};
@@ -203,13 +200,8 @@ pub fn project_branch(
             });
         }
     }
-    // A vessel end within its junction's transition (see clear_transition_length): its clean
-    // sections are looked for up to the junction's centre, the branch is a stub (below).
-    let one_junction = start_junction.is_some() != end_junction.is_some();
-    let end_within_transition = one_junction && hi <= lo;
-    let (probe_lo, probe_hi) = if end_within_transition { (0.0, length) } else { (lo, hi) };
     // Whether the sections past a transition suffice is decided below, on the clean ones.
-    if hi <= lo && !end_within_transition {
+    if hi <= lo {
         return Err(Error::Geometry(format!(
             "{}: branch {name} ({length:.2} mm long) ends within its junction's transition ({:.2} mm): mesh a longer \
              stretch of the vessel",
@@ -218,8 +210,7 @@ pub fn project_branch(
         )));
     }
     // Only the samples away from junctions decide where a vessel end is clean.
-    let inside: Vec<usize> =
-        (0..samples.len()).filter(|&i| samples[i].s >= probe_lo && samples[i].s <= probe_hi).collect();
+    let inside: Vec<usize> = (0..samples.len()).filter(|&i| samples[i].s >= lo && samples[i].s <= hi).collect();
     let probes: Vec<(usize, Probe)> =
         inside.par_iter().map(|&i| (i, cast_section(template, surface, &samples[i], orient).0)).collect();
 
@@ -258,28 +249,9 @@ pub fn project_branch(
         Some(_) => hi,
         None => samples[i1].s - r1 * (trim_outlet + if outlet_closed { CLOSED_END_MARGIN } else { 0.0 }),
     };
-    // The vessel end's section would lie in the junction's transition (a trunk shorter than its
-    // junction's reach; a branch whose oblique end begins where the transition ends): the stub's
-    // one section (below) stands where the transition would end or, short of that, at the vessel
-    // end's clean section nearest it. The margin from a closed end gives way first.
-    let (s_start, s_end) = if one_junction && s_end <= s_start {
-        let s = if start_junction.is_some() { s_start.min(samples[i1].s) } else { s_end.max(samples[i0].s) };
-        (s, s)
-    } else {
-        (s_start, s_end)
-    };
-    if (start_junction.is_some() && s_start <= 0.0) || (end_junction.is_some() && s_end >= length) {
-        return Err(Error::Geometry(format!(
-            "{}: branch {name} ({length:.2} mm long) has no clean cross-section between its junction and its vessel \
-             end: the end lies inside the junction. Mesh a longer stretch of the vessel",
-            surface.source.display()
-        )));
-    }
-    let check_from = if start_junction.is_some() { s_start } else { samples[i0].s.min(s_start) };
-    let check_to = if end_junction.is_some() { s_end } else { samples[i1].s.max(s_end) };
-    if let Some((bad, p)) =
-        probes.iter().find(|(i, p)| samples[*i].s >= check_from && samples[*i].s <= check_to && !p.valid())
-    {
+    if let Some((bad, p)) = probes.iter().find(|(i, p)| {
+        samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !p.valid()
+    }) {
         return Err(Error::Geometry(format!(
             "{}: the cross-section of branch {name} {} does not close: {} of {} rays miss the lumen surface and {} \
              meet it from outside. The surface may have a hole there, or the centerline leaves the lumen; repair \
@@ -293,7 +265,8 @@ pub fn project_branch(
     }
     // A vessel end too close to its junction for a stretch of ordinary sections (a short branch
     // clipped obliquely): the transition runs on to the end's section, the only ordinary one.
-    let stub = one_junction && s_end >= s_start && s_end - s_start < 0.5 * (r0 + r1);
+    let stub =
+        start_junction.is_some() != end_junction.is_some() && s_end > s_start && s_end - s_start < 0.5 * (r0 + r1);
     if s_end - s_start < 0.5 * (r0 + r1) && !stub {
         return Err(Error::Geometry(format!(
             "{}: only {:.3} mm of branch {name} (from {:.2} to {:.2} mm) has clean cross-sections, too short to \
@@ -396,8 +369,7 @@ const CLEAR_SEARCH: f64 = 6.0;
 /// geometric estimate of [`crate::junction::transition_length`], moved away from the junction
 /// until the section and the next radius of the branch are clear of the other branches. None
 /// when the branch runs to another junction and no section of this junction's half of it is
-/// clear: the branch is then a bridge (see [`bridge`]). The estimate itself when it reaches past
-/// a vessel end: the branch is then a stub (see [`project_branch`]).
+/// clear: the branch is then a bridge (see [`bridge`]).
 pub fn clear_transition_length(
     geometry: &JunctionGeometry,
     slot: usize,
@@ -476,12 +448,6 @@ pub fn clear_transition_length(
     if far_junction {
         return Ok(None);
     }
-    // The vessel end lies within the junction's reach (sphinxsys_pulmonary_bifurcation's trunk:
-    // 17 mm from its inlet's face to a junction of radius 15.6 mm): the transition takes the
-    // whole branch, and project_branch keeps the vessel end's section as its only ordinary one.
-    if estimate > reach {
-        return Ok(Some(estimate));
-    }
     let place = format!(
         "{}: branch {} ({len:.1} mm long) at the junction at ({:.3}, {:.3}, {:.3}) mm",
         setup.surface.source.display(),
@@ -490,6 +456,12 @@ pub fn clear_transition_length(
         geometry.centre.y,
         geometry.centre.z
     );
+    if estimate > reach {
+        return Err(Error::Geometry(format!(
+            "{place}: the junction's transition needs {estimate:.1} mm of it, more than the branch leaves before its \
+             end ({reach:.1} mm): the branch ends too close to the junction. Mesh a longer stretch of the vessel"
+        )));
+    }
     Err(Error::Geometry(format!(
         "{place}: no cross-section within {d:.1} mm of the junction is clear of the other branches (every ray \
          meeting this branch's wall within {CLEAR_REACH} radii, on a gently bending centerline, behind the \
