@@ -47,19 +47,6 @@ pub enum Freedom {
 /// element, fixed while it is optimised (the centroid term's axes span twice the element, so
 /// they count a quarter).
 pub fn element_penalty(c: &[Point3<f64>; 8], size: f64) -> f64 {
-    penalty_terms(c, size, |_| true)
-}
-
-/// The terms of [`element_penalty`] that move with corner `corner`: the centroid's and those of
-/// the corner and its three edge neighbours. The other four do not change when only that
-/// corner moves, so a node's optimisation compares these alone (half the work; the same
-/// decisions, to rounding).
-fn corner_penalty(c: &[Point3<f64>; 8], size: f64, corner: usize) -> f64 {
-    penalty_terms(c, size, |i| i == corner || HEX_CORNER_NEIGHBOURS[i].contains(&corner))
-}
-
-/// The centroid's term and the corner terms `counted` selects.
-fn penalty_terms(c: &[Point3<f64>; 8], size: f64, counted: impl Fn(usize) -> bool) -> f64 {
     let volume = size * size * size;
     let term = |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>, volume: f64| {
         let l = a.norm() * b.norm() * d.norm();
@@ -75,7 +62,7 @@ fn penalty_terms(c: &[Point3<f64>; 8], size: f64, counted: impl Fn(usize) -> boo
         sum([4, 5, 6, 7]) - sum([0, 1, 2, 3]),
         volume * 64.0,
     );
-    for (i, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate().filter(|(i, _)| counted(*i)) {
+    for (i, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
         total += term(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i], volume);
     }
     total
@@ -86,12 +73,11 @@ fn penalty_terms(c: &[Point3<f64>; 8], size: f64, counted: impl Fn(usize) -> boo
 /// so the result does not depend on the thread count.
 pub fn optimise_nodes(nodes: &mut [Point3<f64>], elements: &[Hex], freedom: &[Freedom], surface: &LumenSurface) {
     let is_free = |n: u32| freedom.get(n as usize).is_some_and(|f| *f != Freedom::Fixed);
-    // Each free node's elements, with its corner in each.
-    let mut incident: Vec<Vec<(u32, u8)>> = vec![Vec::new(); freedom.len()];
+    let mut incident: Vec<Vec<u32>> = vec![Vec::new(); freedom.len()];
     for (e, h) in elements.iter().enumerate() {
-        for (corner, &n) in h.iter().enumerate() {
-            if is_free(n) {
-                incident[n as usize].push((e as u32, corner as u8));
+        for &n in h {
+            if is_free(n) && incident[n as usize].last() != Some(&(e as u32)) {
+                incident[n as usize].push(e as u32);
             }
         }
     }
@@ -102,7 +88,7 @@ pub fn optimise_nodes(nodes: &mut [Point3<f64>], elements: &[Hex], freedom: &[Fr
     // Each element's size: its mean edge length as it was.
     let mut size = vec![0.0; elements.len()];
     for &n in &free {
-        for &(e, _) in &incident[n as usize] {
+        for &e in &incident[n as usize] {
             if size[e as usize] == 0.0 {
                 let h = &elements[e as usize];
                 size[e as usize] = crate::mesh::HEX_EDGES
@@ -113,13 +99,10 @@ pub fn optimise_nodes(nodes: &mut [Point3<f64>], elements: &[Hex], freedom: &[Fr
             }
         }
     }
-    // The objective's part that moves with node n.
     let local = |nodes: &[Point3<f64>], n: u32| -> f64 {
         incident[n as usize]
             .iter()
-            .map(|&(e, corner)| {
-                corner_penalty(&elements[e as usize].map(|m| nodes[m as usize]), size[e as usize], corner as usize)
-            })
+            .map(|&e| element_penalty(&elements[e as usize].map(|m| nodes[m as usize]), size[e as usize]))
             .sum()
     };
     // The shortest edge at each free node, from the start (the step's scale).
@@ -143,7 +126,7 @@ pub fn optimise_nodes(nodes: &mut [Point3<f64>], elements: &[Hex], freedom: &[Fr
                 if f0 > 0.0 && h > 0.0 { descend(nodes, n, h, f0, freedom[n as usize], &local, surface) } else { f0 };
             after += f;
             if f < f0 {
-                for &(e, _) in &incident[n as usize] {
+                for &e in &incident[n as usize] {
                     for &m in &elements[e as usize] {
                         if is_free(m) {
                             next[m as usize] = true;
@@ -206,12 +189,14 @@ fn descend(
 }
 
 /// The shortest edge of the given elements that meets node `n`.
-fn shortest_edge(nodes: &[Point3<f64>], elements: &[Hex], incident: &[(u32, u8)], n: u32) -> f64 {
+fn shortest_edge(nodes: &[Point3<f64>], elements: &[Hex], incident: &[u32], n: u32) -> f64 {
     let mut shortest = f64::INFINITY;
-    for &(e, corner) in incident {
+    for &e in incident {
         let h = &elements[e as usize];
-        for &nb in &HEX_CORNER_NEIGHBOURS[corner as usize] {
-            shortest = shortest.min((nodes[h[nb] as usize] - nodes[n as usize]).norm());
+        if let Some(c) = h.iter().position(|&m| m == n) {
+            for &nb in &HEX_CORNER_NEIGHBOURS[c] {
+                shortest = shortest.min((nodes[h[nb] as usize] - nodes[n as usize]).norm());
+            }
         }
     }
     if shortest.is_finite() {
@@ -256,23 +241,6 @@ mod tests {
         sheared[6] = Point3::new(1.6, 1.6, 1.0);
         assert!(scaled_jacobian(&sheared) > 0.0);
         assert!(element_penalty(&folded, 1.0) > element_penalty(&sheared, 1.0));
-    }
-
-    /// Moving one corner changes the element's penalty by what it changes the corner's terms.
-    #[test]
-    fn a_corner_penalty_moves_as_the_element_penalty_does() {
-        let mut sheared = unit_cube(Vector3::zeros());
-        sheared[6] = Point3::new(1.7, 1.5, 0.9);
-        sheared[1] = Point3::new(1.3, -0.4, 0.2);
-        for corner in 0..8 {
-            let mut moved = sheared;
-            // Most of the way to the centre: the corner's terms fall below the target.
-            moved[corner] = Point3::new(0.5, 0.5, 0.5) + (moved[corner] - Point3::new(0.5, 0.5, 0.5)) * 0.1;
-            let whole = element_penalty(&moved, 1.0) - element_penalty(&sheared, 1.0);
-            let part = corner_penalty(&moved, 1.0, corner) - corner_penalty(&sheared, 1.0, corner);
-            assert!(whole.abs() > 1e-6, "corner {corner}: the move changes the penalty");
-            assert!((whole - part).abs() < 1e-12, "corner {corner}: {whole} vs {part}");
-        }
     }
 
     /// Two cubes side by side share a face; its four nodes are pushed through the far cube's
