@@ -13,15 +13,26 @@
 //! std rounds up and zmij to even: those (found exactly), NaN and infinities go to std. This
 //! module only lays the digits out as each std format does.
 //!
-//! `{:.12e}` (13 significant digits, correctly rounded) is derived from the shortest digits D:
-//! with at most 13 digits, D padded with zeros is the answer (the binary value lies within half
-//! an ulp of D, far from a 13-digit rounding boundary); with 15 or more, rounding D to 13 digits
-//! rounds the binary value alike (a 14-digit midpoint between the two would itself be a shorter
-//! candidate in the round-trip interval); with exactly 14 digits ending in 5, D may be that
-//! midpoint and the binary value decides, so std's own formatting is asked (as for subnormals,
-//! whose precision is below 13 digits).
+//! # Digits found in integers
+//! Where the writers' numbers lie (|x| from about 1e-15 to 1e17), the digits come from exact
+//! integer arithmetic instead of zmij's text, which had to be read back: x = m x 2^e times
+//! 10^q is m x 5^q x 2^(e + q), with 5^q in a table of 128-bit integers, so an integer part and a
+//! remainder by a shift. The shortest digits ([`Shortest::exact`]): the integers between the ends
+//! of x's round-trip interval at 17 or 18 digits, the largest power of ten with a multiple
+//! among them, the multiple closest to x. `{:.12e}` ([`thirteen_digits`]): x scaled to 13 digits
+//! before the point, rounded by its remainder. A tie (a remainder of exactly one half) is left
+//! to the paths below. The unit tests compare both with std and with zmij on random numbers.
+//!
+//! Elsewhere `{:.12e}` (13 significant digits, correctly rounded) is derived from the shortest
+//! digits D: with at most 13 digits, D padded with zeros is the answer (the binary value lies
+//! within half an ulp of D, far from a 13-digit rounding boundary); with 15 or more, rounding D
+//! to 13 digits rounds the binary value alike (a 14-digit midpoint between the two would itself
+//! be a shorter candidate in the round-trip interval); with exactly 14 digits ending in 5, D may
+//! be that midpoint and the binary value decides, so std's own formatting is asked (as for
+//! subnormals, whose precision is below 13 digits).
 
 use rayon::prelude::*;
+use std::cmp::Ordering;
 use std::io::{self, Write};
 
 /// A growing text buffer with number formatting.
@@ -47,8 +58,62 @@ impl Shortest {
         if !x.is_finite() {
             return None;
         }
+        if let Some(exact) = Shortest::exact(x) {
+            return Some(exact);
+        }
         let out = Shortest::parse(zmij::Buffer::new().format_finite(x).as_bytes());
         (!out.halfway_from_a_neighbour(x.abs())).then_some(out)
+    }
+
+    /// The shortest digits of `x` found exactly in integers, without zmij's text to read back
+    /// (that reading and the layout after it cost three times zmij's own work in `exp`, the
+    /// OpenFOAM points): x x 10^q and the ends of its round-trip interval (halfway to the
+    /// neighbouring doubles, included when the significand is even, as std reads them) scaled to
+    /// 17 or 18 digits before the point, the largest power of ten t with a multiple in the
+    /// interval, the multiple closest to x. `None` where std or zmij decides: zero, subnormals,
+    /// |x| outside about [1e-15, 1e17) (the products exceed 128 bits), and a tie between the two
+    /// multiples around x.
+    fn exact(x: f64) -> Option<Shortest> {
+        let bits = x.abs().to_bits();
+        let biased = (bits >> 52) as i32;
+        if biased == 0 || biased == 0x7ff {
+            return None;
+        }
+        let fraction = bits & ((1u64 << 52) - 1);
+        let m = fraction | (1u64 << 52);
+        let q = 16 - (((biased - 1023) * 78913) >> 18); // x x 10^q in [10^16, 2 x 10^17)
+        let five = *FIVES.get(usize::try_from(q).ok()?)?;
+        let shift = u32::try_from(1077 - biased - q).ok().filter(|s| (1..128).contains(s))?;
+        // 4 x x, its neighbours at +-2 (+1 below a power of two), times 5^q: x x 10^q x 2^shift.
+        let value = (4 * m) as u128 * five;
+        let upper = value + 2 * five;
+        let lower = value - if fraction == 0 && biased > 1 { five } else { 2 * five };
+        let (inclusive, mask) = (m % 2 == 0, (1u128 << shift) - 1);
+        let hi = (upper >> shift) as u64 - (!inclusive && upper & mask == 0) as u64;
+        let lo = (lower >> shift) as u64 + (!inclusive || lower & mask != 0) as u64;
+        let (mut t, mut zeros) = (1u64, 0);
+        while hi / (10 * t) * (10 * t) >= lo {
+            t *= 10;
+            zeros += 1;
+        }
+        let (whole, rest) = ((value >> shift) as u64, value & mask);
+        let down = whole / t * t;
+        // Where x lies between `down` and `down + t`, against their midpoint.
+        let against_half = match t {
+            1 => rest.cmp(&(1u128 << (shift - 1))),
+            _ => (whole - down).cmp(&(t / 2)).then(if rest == 0 { Ordering::Equal } else { Ordering::Greater }),
+        };
+        let mut digits = match (down >= lo, down + t <= hi, against_half) {
+            (true, true, Ordering::Equal) | (false, false, _) => return None,
+            (true, false, _) | (true, true, Ordering::Less) => down / t,
+            _ => down / t + 1,
+        };
+        while digits % 10 == 0 {
+            digits /= 10;
+            zeros += 1;
+        }
+        let n = decimal_len(digits);
+        Some(Shortest { negative: x.is_sign_negative(), digits, n, exp: n as i32 - 1 + zeros - q })
     }
 
     /// The digits of zmij's text, `[-]int.frac` or `[-]d[.ddd]e[-]k`: the digit characters read
@@ -123,6 +188,58 @@ fn short_exact_expansion(x: f64) -> bool {
     digits < 19.5
 }
 
+/// 5^0 to 5^31: times a 53-bit significand, they fit in 128 bits.
+const FIVES: [u128; 32] = {
+    let mut t = [1u128; 32];
+    let mut i = 1;
+    while i < 32 {
+        t[i] = 5 * t[i - 1];
+        i += 1;
+    }
+    t
+};
+
+/// The 13 significant digits of `{:.12e}` of `a` (> 0, normal) and their exponent, found
+/// exactly in integers: a x 10^q = m x 5^q x 2^(e + q) for a = m x 2^e, its integer part and
+/// remainder by a shift. Through zmij's shortest digits (the text, read back, rounded), `exp12`
+/// cost three times `display`, and the Abaqus and CalculiX decks write some five million such
+/// numbers at 0.8 M hexes. `None` where std decides: q outside 0..=31 (`a` outside about
+/// [1e-19, 1e13)), zero, subnormals, non-finite values, and a remainder of exactly one half,
+/// where the rounding of a tie is std's to choose.
+fn thirteen_digits(a: f64) -> Option<(u64, i32)> {
+    const TEN13: u64 = 10_000_000_000_000;
+    let bits = a.to_bits();
+    let biased = ((bits >> 52) & 0x7ff) as i32;
+    if biased == 0 || biased == 0x7ff || a < 0.0 {
+        return None;
+    }
+    let m = (bits & ((1u64 << 52) - 1)) | (1u64 << 52);
+    let e = biased - 1075;
+    // floor(log2 a) x log10 2, rounded down: 10^k <= a < 2 x 10^(k + 1), so a x 10^(12 - k) lies
+    // in [10^12, 2 x 10^13) and has 13 or 14 digits before the point.
+    let k = ((biased - 1023) * 78913) >> 18;
+    let scaled = |q: i32| -> Option<(u64, u128, u32)> {
+        let shift = u32::try_from(-(e + q)).ok().filter(|s| (1..128).contains(s))?;
+        let p = m as u128 * FIVES.get(usize::try_from(q).ok()?)?;
+        Some(((p >> shift) as u64, p & ((1u128 << shift) - 1), shift))
+    };
+    let mut q = 12 - k;
+    let mut s = scaled(q)?;
+    if s.0 >= TEN13 {
+        q -= 1;
+        s = scaled(q)?;
+    }
+    let (int, rest, shift) = s;
+    let d = match rest.cmp(&(1u128 << (shift - 1))) {
+        Ordering::Less => int,
+        Ordering::Greater => int + 1,
+        Ordering::Equal => return None,
+    };
+    debug_assert!((TEN13 / 10..=TEN13).contains(&d));
+    // 9.9999999999999x rounds up to 10.00...0
+    Some(if d == TEN13 { (d / 10, 13 - q) } else { (d, 12 - q) })
+}
+
 /// The exponent after zmij's `e`: `[-+]digits`.
 fn exponent(t: &[u8]) -> i32 {
     let (sign, t) = match t.first() {
@@ -144,10 +261,50 @@ const PAIRS: &[u8; 200] =
 5051525354555657585960616263646566676869707172737475767778798081828384858687888990919293949596979899";
 
 /// The two digits of `pair` (< 100) at the start of `out`.
-fn put_pair(out: &mut [std::mem::MaybeUninit<u8>], pair: u32) {
+fn put_pair(out: &mut [u8], pair: u32) {
     let at = 2 * pair as usize;
-    out[0].write(PAIRS[at]);
-    out[1].write(PAIRS[at + 1]);
+    out[..2].copy_from_slice(&PAIRS[at..at + 2]);
+}
+
+/// A buffer on the stack where a number is laid out before it is appended ([`Text::field`]):
+/// digits right-aligned before [`DIGITS_END`] (the 20 of any `u64`, with room before them for a
+/// sign or a point), an exponent after.
+type Field = [u8; FIELD];
+const FIELD: usize = 64;
+const DIGITS_END: usize = 24;
+/// Bytes [`Text::field`] copies.
+const COPIED: usize = 32;
+
+/// Writes the digits of `v` right-aligned before [`DIGITS_END`] in `field` and returns how many
+/// (1 for 0); the bytes before them are left as they are ('0' where the caller wants leading
+/// zeros). In a buffer rather than straight into the text, so that neither the digit count nor
+/// a reservation is needed first; eight digits at a time in 32 bits, their four pairs
+/// independent of one another, rather than one chain of 64-bit divisions.
+fn right_aligned(field: &mut Field, mut v: u64) -> usize {
+    let mut end = DIGITS_END;
+    while v >= 100_000_000 {
+        let low = (v % 100_000_000) as u32;
+        v /= 100_000_000;
+        let (high, low) = (low / 10_000, low % 10_000);
+        for (k, pair) in [high / 100, high % 100, low / 100, low % 100].into_iter().enumerate() {
+            put_pair(&mut field[end - 8 + 2 * k..], pair);
+        }
+        end -= 8;
+    }
+    let mut rest = v as u32;
+    while rest >= 100 {
+        put_pair(&mut field[end - 2..], rest % 100);
+        rest /= 100;
+        end -= 2;
+    }
+    if rest >= 10 {
+        put_pair(&mut field[end - 2..], rest);
+        end -= 2;
+    } else {
+        field[end - 1] = b'0' + rest as u8;
+        end -= 1;
+    }
+    DIGITS_END - end
 }
 
 /// Whether the binary value `x` (>= 0) is exactly m x 10^p.
@@ -193,7 +350,9 @@ impl Text {
     }
     /// An unsigned integer (`{}`).
     pub fn uint(&mut self, x: u64) -> &mut Self {
-        self.digits(x, decimal_len(x));
+        let mut field = [b'0'; FIELD];
+        let n = right_aligned(&mut field, x);
+        self.field(&field, DIGITS_END - n..DIGITS_END);
         self
     }
     /// Integers separated by `sep`.
@@ -207,55 +366,61 @@ impl Text {
         self
     }
 
-    /// The n digits of `digits` (< 10^n; leading zeros written when it has fewer) straight into
-    /// the buffer: through a digit buffer and a copy, each number cost a call to memmove, a tenth
-    /// of the writers' time. Eight digits at a time in 32 bits, their four pairs independent of
-    /// one another, rather than one chain of 64-bit divisions.
-    fn digits(&mut self, mut digits: u64, n: u32) {
-        debug_assert!(digits.checked_ilog10().is_none_or(|l| l < n));
-        let (start, n) = (self.bytes.len(), n as usize);
-        self.bytes.reserve(n);
-        let out = &mut self.bytes.spare_capacity_mut()[..n];
-        let mut i = n;
-        while i >= 8 {
-            let low = (digits % 100_000_000) as u32;
-            digits /= 100_000_000;
-            let (high, low) = (low / 10_000, low % 10_000);
-            for (k, pair) in [high / 100, high % 100, low / 100, low % 100].into_iter().enumerate() {
-                put_pair(&mut out[i - 8 + 2 * k..], pair);
-            }
-            i -= 8;
+    /// The n digits of `digits` (< 10^n, n <= 20; leading zeros written when it has fewer).
+    fn digits(&mut self, digits: u64, n: u32) {
+        debug_assert!(n <= 20 && digits.checked_ilog10().is_none_or(|l| l < n));
+        let mut field = [b'0'; FIELD];
+        right_aligned(&mut field, digits);
+        self.field(&field, DIGITS_END - n as usize..DIGITS_END);
+    }
+    /// Bytes `span` of `field` (at most [`COPIED`] of them, from at most `FIELD - COPIED`),
+    /// appended by a copy of fixed length, [`COPIED`] bytes from where they start, and the
+    /// length set after: a copy of a length known only at run time is a call to memmove
+    /// (through one, each number cost a tenth of the writers' time).
+    fn field(&mut self, field: &Field, span: std::ops::Range<usize>) {
+        assert!(span.start <= FIELD - COPIED && span.len() <= COPIED);
+        let start = self.bytes.len();
+        self.bytes.reserve(COPIED);
+        // SAFETY: the source, COPIED bytes from span.start, lies within `field`; the capacity
+        // holds COPIED bytes after the length, the first span.len() of which become the text.
+        unsafe {
+            std::ptr::copy_nonoverlapping(field.as_ptr().add(span.start), self.bytes.as_mut_ptr().add(start), COPIED);
+            self.bytes.set_len(start + span.len());
         }
-        let mut rest = digits as u32;
-        while i >= 2 {
-            put_pair(&mut out[i - 2..], rest % 100);
-            rest /= 100;
-            i -= 2;
-        }
-        if i == 1 {
-            out[0].write(b'0' + rest as u8);
-        }
-        // SAFETY: the n bytes after the length are initialised just above.
-        unsafe { self.bytes.set_len(start + n) };
     }
     fn sign(&mut self, s: &Shortest) {
         if s.negative {
             self.bytes.push(b'-');
         }
     }
-    /// d1.d2...dn e k of n digits, without the sign.
+    /// d1.d2...dn e k of n digits (n <= 20), without the sign: the digits laid out in a
+    /// [`Field`], the first moved left over a point, the exponent after them, the whole appended
+    /// at once (through `digits` twice and `uint`, the layout cost as much as finding the digits).
     fn exponential(&mut self, digits: u64, n: u32, exp: i32) {
-        let tail = 10u64.pow(n - 1);
-        self.digits(digits / tail, 1);
+        let mut field = [b'0'; FIELD];
+        right_aligned(&mut field, digits);
+        let mut first = DIGITS_END - n as usize;
         if n > 1 {
-            self.bytes.push(b'.');
-            self.digits(digits % tail, n - 1);
+            field[first - 1] = field[first];
+            field[first] = b'.';
+            first -= 1;
         }
-        self.bytes.push(b'e');
-        if exp < 0 {
-            self.bytes.push(b'-');
+        field[DIGITS_END] = b'e';
+        field[DIGITS_END + 1] = b'-';
+        let mut end = DIGITS_END + 1 + (exp < 0) as usize;
+        let e = exp.unsigned_abs();
+        if e >= 100 {
+            field[end] = b'0' + (e / 100) as u8;
+            end += 1;
         }
-        self.uint(exp.unsigned_abs() as u64);
+        if e >= 10 {
+            put_pair(&mut field[end..], e % 100);
+            end += 2;
+        } else {
+            field[end] = b'0' + e as u8;
+            end += 1;
+        }
+        self.field(&field, first..end);
     }
     /// Positional notation of the shortest digits, without the sign; `min_fraction` 1 writes
     /// `.0` after an integer.
@@ -337,6 +502,13 @@ impl Text {
     }
     /// `format!("{x:.12e}")`: 13 significant digits, correctly rounded (see the module notes).
     pub fn exp12(&mut self, x: f64) -> &mut Self {
+        if let Some((d, exp)) = thirteen_digits(x.abs()) {
+            if x.is_sign_negative() {
+                self.bytes.push(b'-');
+            }
+            self.exponential(d, 13, exp);
+            return self;
+        }
         // Subnormals carry fewer than 13 significant digits: the shortest digits say too little.
         if x != 0.0 && x.abs() < f64::MIN_POSITIVE {
             return self.fallback(format_args!("{x:.12e}"));
@@ -515,6 +687,16 @@ mod tests {
             check(x);
             check(-x);
         }
+        // Ties at the 13th digit (std rounds them; `thirteen_digits` leaves them to it) and
+        // their neighbours: n + 1/2 of 13 digits, n + 1/4 of 12 digits.
+        for _ in 0..10_000 {
+            let n = (1_000_000_000_000 + g.next() % 9_000_000_000_000) as f64;
+            for x in [n + 0.5, (n / 10.0).floor() + 0.25, n + 1.5, n - 0.5] {
+                check(x);
+                check(f64::from_bits(x.to_bits() + 1));
+                check(f64::from_bits(x.to_bits() - 1));
+            }
+        }
         for _ in 0..300_000 {
             let bits = 1 + g.next() % 52;
             let m = (g.next() >> (64 - bits)) | 1;
@@ -529,6 +711,43 @@ mod tests {
             let rounded: f64 = format!("{x:.*e}", digits as usize).parse().unwrap();
             check(rounded);
         }
+    }
+
+    /// The exact path against zmij's digits, on the magnitudes the writers meet most (lengths
+    /// in mm and m, unit components) and at powers of two, where the interval is lopsided.
+    #[test]
+    fn exact_digits_are_zmijs() {
+        let mut g = Bits(0x2545f4914f6cdd1d);
+        let (mut exact, mut total) = (0, 0);
+        for i in 0..2_000_000 {
+            let x = match i % 4 {
+                0 => f64::from_bits(g.next()),
+                1 => ((g.next() >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 10f64.powi((g.next() % 36) as i32 - 18),
+                2 => 2f64.powi((g.next() % 120) as i32 - 60) * if g.next() % 2 == 0 { 1.0 } else { -1.0 },
+                _ => f64::from_bits(g.next() % (1 << 20) + ((g.next() % 200 + 924) << 52)),
+            };
+            if !x.is_finite() {
+                continue;
+            }
+            total += 1;
+            let Some(s) = Shortest::exact(x) else { continue };
+            exact += 1;
+            let z = Shortest::parse(zmij::Buffer::new().format_finite(x).as_bytes());
+            let same = (s.negative, s.digits, s.n, s.exp) == (z.negative, z.digits, z.n, z.exp);
+            assert!(
+                same,
+                "bits {:#x}: {} {} {} against zmij's {} {} {}",
+                x.to_bits(),
+                s.digits,
+                s.n,
+                s.exp,
+                z.digits,
+                z.n,
+                z.exp
+            );
+        }
+        // Every value of the magnitudes written (kinds 1 to 3) and some of the random bits.
+        assert!(exact > total / 2, "the exact path took {exact} of {total}");
     }
 
     #[test]
