@@ -250,61 +250,57 @@ fn exponent(t: &[u8]) -> i32 {
     sign * t.iter().fold(0, |e, d| 10 * e + (d - b'0') as i32)
 }
 
-/// The number of decimal digits of `x` (1 for 0).
+/// The number of decimal digits of `x` (1 for 0): from the bit length, times log10 2 (1233 /
+/// 4096, exact up to 2^64), one less when `x` is below the power of ten that gives.
 fn decimal_len(x: u64) -> u32 {
-    x.checked_ilog10().unwrap_or(0) + 1
-}
-
-/// The two digits of 0 to 99.
-const PAIRS: &[u8; 200] =
-    b"0001020304050607080910111213141516171819202122232425262728293031323334353637383940414243444546474849\
-5051525354555657585960616263646566676869707172737475767778798081828384858687888990919293949596979899";
-
-/// The two digits of `pair` (< 100) at the start of `out`.
-fn put_pair(out: &mut [u8], pair: u32) {
-    let at = 2 * pair as usize;
-    out[..2].copy_from_slice(&PAIRS[at..at + 2]);
-}
-
-/// A buffer on the stack where a number is laid out before it is appended ([`Text::field`]):
-/// digits right-aligned before [`DIGITS_END`] (the 20 of any `u64`, with room before them for a
-/// sign or a point), an exponent after.
-type Field = [u8; FIELD];
-const FIELD: usize = 64;
-const DIGITS_END: usize = 24;
-/// Bytes [`Text::field`] copies.
-const COPIED: usize = 32;
-
-/// Writes the digits of `v` right-aligned before [`DIGITS_END`] in `field` and returns how many
-/// (1 for 0); the bytes before them are left as they are ('0' where the caller wants leading
-/// zeros). In a buffer rather than straight into the text, so that neither the digit count nor
-/// a reservation is needed first; eight digits at a time in 32 bits, their four pairs
-/// independent of one another, rather than one chain of 64-bit divisions.
-fn right_aligned(field: &mut Field, mut v: u64) -> usize {
-    let mut end = DIGITS_END;
-    while v >= 100_000_000 {
-        let low = (v % 100_000_000) as u32;
-        v /= 100_000_000;
-        let (high, low) = (low / 10_000, low % 10_000);
-        for (k, pair) in [high / 100, high % 100, low / 100, low % 100].into_iter().enumerate() {
-            put_pair(&mut field[end - 8 + 2 * k..], pair);
+    const POWERS: [u64; 20] = {
+        let mut p = [1u64; 20];
+        let mut i = 1;
+        while i < 20 {
+            p[i] = 10 * p[i - 1];
+            i += 1;
         }
-        end -= 8;
+        p
+    };
+    let y = x | 1; // 0 has the digits of 1; no power of ten above 1 is odd, so the count stays
+    let guess = ((64 - y.leading_zeros()) * 1233) >> 12; // 0..=19
+    guess + 1 - (y < POWERS[guess as usize]) as u32
+}
+
+/// The eight digits of `x` (< 10^8, leading zeros included) as ASCII in a `u64`, the first in
+/// the lowest byte: the two halves of four digits in lanes of 32 bits, each split into two pairs
+/// in lanes of 16, each pair into two digits in bytes, every lane at once by a multiplication
+/// (v x 10486 / 2^20 is v / 100 below 10^4, v x 103 / 2^10 is v / 10 below 100).
+fn eight_digits(x: u32) -> u64 {
+    let fours = (x / 10_000) as u64 | ((x % 10_000) as u64) << 32;
+    let hundreds = ((fours * 10486) >> 20) & 0x0000_007f_0000_007f;
+    let pairs = hundreds | (fours - hundreds * 100) << 16;
+    let tens = ((pairs * 103) >> 10) & 0x000f_000f_000f_000f;
+    (tens | (pairs - tens * 10) << 8) | 0x3030_3030_3030_3030
+}
+
+/// Stores the n digits of `v` (v < 10^n, 1 <= n <= 20; leading zeros where it has fewer) at
+/// `out`, eight per store ([`eight_digits`]), a shorter first group shifted to the end of its
+/// eight bytes and overwritten by the next: at most 24 bytes from `out` are written.
+///
+/// # Safety
+/// `out` must be valid for writes of 24 bytes.
+unsafe fn store_digits(out: *mut u8, v: u64, n: usize) {
+    const E8: u64 = 100_000_000;
+    // SAFETY (of every store): at `out` or n - 8, n - 16 bytes after it, within its 24 bytes.
+    let store = |at: *mut u8, ascii: u64| unsafe { at.cast::<u64>().write_unaligned(ascii.to_le()) };
+    unsafe {
+        if n <= 8 {
+            store(out, eight_digits(v as u32) >> (8 * (8 - n)));
+        } else if n <= 16 {
+            store(out, eight_digits((v / E8) as u32) >> (8 * (16 - n)));
+            store(out.add(n - 8), eight_digits((v % E8) as u32));
+        } else {
+            store(out, eight_digits((v / (E8 * E8)) as u32) >> (8 * (24 - n)));
+            store(out.add(n - 16), eight_digits((v / E8 % E8) as u32));
+            store(out.add(n - 8), eight_digits((v % E8) as u32));
+        }
     }
-    let mut rest = v as u32;
-    while rest >= 100 {
-        put_pair(&mut field[end - 2..], rest % 100);
-        rest /= 100;
-        end -= 2;
-    }
-    if rest >= 10 {
-        put_pair(&mut field[end - 2..], rest);
-        end -= 2;
-    } else {
-        field[end - 1] = b'0' + rest as u8;
-        end -= 1;
-    }
-    DIGITS_END - end
 }
 
 /// Whether the binary value `x` (>= 0) is exactly m x 10^p.
@@ -350,42 +346,40 @@ impl Text {
     }
     /// An unsigned integer (`{}`).
     pub fn uint(&mut self, x: u64) -> &mut Self {
-        let mut field = [b'0'; FIELD];
-        let n = right_aligned(&mut field, x);
-        self.field(&field, DIGITS_END - n..DIGITS_END);
+        self.put_digits(b"", x, decimal_len(x));
         self
     }
-    /// Integers separated by `sep`.
+    /// Integers separated by `sep` (at most four bytes).
     pub fn uints(&mut self, xs: impl IntoIterator<Item = u64>, sep: &str) -> &mut Self {
         for (i, x) in xs.into_iter().enumerate() {
-            if i > 0 {
-                self.str(sep);
-            }
-            self.uint(x);
+            self.put_digits(if i > 0 { sep.as_bytes() } else { b"" }, x, decimal_len(x));
         }
         self
     }
 
-    /// The n digits of `digits` (< 10^n, n <= 20; leading zeros written when it has fewer).
+    /// The n digits of `digits` (< 10^n, 1 <= n <= 20; leading zeros written when it has fewer).
     fn digits(&mut self, digits: u64, n: u32) {
-        debug_assert!(n <= 20 && digits.checked_ilog10().is_none_or(|l| l < n));
-        let mut field = [b'0'; FIELD];
-        right_aligned(&mut field, digits);
-        self.field(&field, DIGITS_END - n as usize..DIGITS_END);
+        self.put_digits(b"", digits, n);
     }
-    /// Bytes `span` of `field` (at most [`COPIED`] of them, from at most `FIELD - COPIED`),
-    /// appended by a copy of fixed length, [`COPIED`] bytes from where they start, and the
-    /// length set after: a copy of a length known only at run time is a call to memmove
-    /// (through one, each number cost a tenth of the writers' time).
-    fn field(&mut self, field: &Field, span: std::ops::Range<usize>) {
-        assert!(span.start <= FIELD - COPIED && span.len() <= COPIED);
+    /// `sep` (at most four bytes) then the n digits of `v` (v < 10^n, 1 <= n <= 20; leading zeros
+    /// where it has fewer), written in place after one reservation ([`store_digits`]). Digits
+    /// written one pair at a time, then copied, cost a call to memmove per number (a tenth of the
+    /// writers' time), and a separator appended on its own another.
+    fn put_digits(&mut self, sep: &[u8], v: u64, n: u32) {
+        assert!(sep.len() <= 4 && (1..=20).contains(&n));
+        debug_assert!(v.checked_ilog10().is_none_or(|l| l < n));
         let start = self.bytes.len();
-        self.bytes.reserve(COPIED);
-        // SAFETY: the source, COPIED bytes from span.start, lies within `field`; the capacity
-        // holds COPIED bytes after the length, the first span.len() of which become the text.
+        self.bytes.reserve(32);
+        // The separator's bytes gathered in a word and stored at once (a loop of byte copies is
+        // compiled into a call to memcpy).
+        let word = sep.iter().rev().fold(0u32, |w, &b| w << 8 | b as u32);
+        // SAFETY: 4 + 24 bytes from `start` are reserved; the first sep.len() + n are written and
+        // become the text.
         unsafe {
-            std::ptr::copy_nonoverlapping(field.as_ptr().add(span.start), self.bytes.as_mut_ptr().add(start), COPIED);
-            self.bytes.set_len(start + span.len());
+            let out = self.bytes.as_mut_ptr().add(start);
+            out.cast::<u32>().write_unaligned(word.to_le());
+            store_digits(out.add(sep.len()), v, n as usize);
+            self.bytes.set_len(start + sep.len() + n as usize);
         }
     }
     fn sign(&mut self, s: &Shortest) {
@@ -393,34 +387,29 @@ impl Text {
             self.bytes.push(b'-');
         }
     }
-    /// d1.d2...dn e k of n digits (n <= 20), without the sign: the digits laid out in a
-    /// [`Field`], the first moved left over a point, the exponent after them, the whole appended
-    /// at once (through `digits` twice and `uint`, the layout cost as much as finding the digits).
+    /// d1.d2...dn e k of n digits (1 <= n <= 20), without the sign, in place after one
+    /// reservation: the digits stored one place to the right ([`store_digits`]), the first moved
+    /// back over a point (splitting them at the first digit took a division by a power of ten
+    /// known only at run time), then `e`, the sign and the exponent's digits gathered in a word.
     fn exponential(&mut self, digits: u64, n: u32, exp: i32) {
-        let mut field = [b'0'; FIELD];
-        right_aligned(&mut field, digits);
-        let mut first = DIGITS_END - n as usize;
-        if n > 1 {
-            field[first - 1] = field[first];
-            field[first] = b'.';
-            first -= 1;
+        assert!((1..=20).contains(&n));
+        let (n, start) = (n as usize, self.bytes.len());
+        let (negative, e) = ((exp < 0) as u64, exp.unsigned_abs()); // |exp| < 1000
+        let e_len = decimal_len(e as u64) as u64;
+        let e_digits = eight_digits(e % 100_000_000) >> (8 * (8 - e_len));
+        let tail = b'e' as u64 | negative * ((b'-' as u64) << 8) | e_digits << (8 * (1 + negative));
+        self.bytes.reserve(32);
+        // SAFETY: 32 bytes from `start` are reserved: the digits take 1 + 24 at most, the tail 8
+        // from at most 21; the first len + 1 + negative + e_len are written and become the text.
+        unsafe {
+            let out = self.bytes.as_mut_ptr().add(start);
+            store_digits(out.add(1), digits, n);
+            out.write(out.add(1).read());
+            let len = if n > 1 { n + 1 } else { 1 };
+            out.add(1).write(b'.'); // overwritten by the tail when n is 1
+            out.add(len).cast::<u64>().write_unaligned(tail.to_le());
+            self.bytes.set_len(start + len + (1 + negative + e_len) as usize);
         }
-        field[DIGITS_END] = b'e';
-        field[DIGITS_END + 1] = b'-';
-        let mut end = DIGITS_END + 1 + (exp < 0) as usize;
-        let e = exp.unsigned_abs();
-        if e >= 100 {
-            field[end] = b'0' + (e / 100) as u8;
-            end += 1;
-        }
-        if e >= 10 {
-            put_pair(&mut field[end..], e % 100);
-            end += 2;
-        } else {
-            field[end] = b'0' + e as u8;
-            end += 1;
-        }
-        self.field(&field, first..end);
     }
     /// Positional notation of the shortest digits, without the sign; `min_fraction` 1 writes
     /// `.0` after an integer.
@@ -755,6 +744,14 @@ mod tests {
         let mut t = Text::default();
         t.uint(0).str(",").uint(u64::MAX).str(";").uints([1, 22, 333], ", ");
         assert_eq!(String::from_utf8(t.bytes).unwrap(), format!("0,{};1, 22, 333", u64::MAX));
+        // Every digit count, at and around the powers of ten, and random values.
+        let mut g = Bits(0x853c49e6748fea9b);
+        let mut xs: Vec<u64> = (0..20).flat_map(|k| [10u64.pow(k) - 1, 10u64.pow(k), 10u64.pow(k) + 1]).collect();
+        xs.extend((0..100_000).map(|i| g.next() >> (i % 64)));
+        let mut t = Text::default();
+        t.uints(xs.iter().copied(), " ");
+        let expected: Vec<String> = xs.iter().map(|x| x.to_string()).collect();
+        assert_eq!(String::from_utf8(t.bytes).unwrap(), expected.join(" "));
     }
 
     #[test]
