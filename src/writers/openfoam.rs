@@ -366,9 +366,6 @@ fn build(
     for (p, &n) in point_node.iter().enumerate() {
         node_point[n as usize] = p as u32;
     }
-    // `+ 0.0` turns -0 into 0, so that files never show "-0e0".
-    let points: Vec<Point3<f64>> =
-        point_node.iter().map(|&n| (mesh.nodes[n as usize].coords * MM_TO_M).map(|x| x + 0.0).into()).collect();
     let cell_face = |slot: usize| -> [u32; 4] {
         face_nodes(&mesh.hexes[first + slot / 6], slot % 6).map(|n| node_point[n as usize])
     };
@@ -401,6 +398,10 @@ fn build(
         }
     }
     drop(partner);
+    // The points after the pairing's table is gone (the peak of the build is the pairing's, and
+    // of the whole run at 0.8 M hexes); `+ 0.0` turns -0 into 0, so that files never show "-0e0".
+    let points: Vec<Point3<f64>> =
+        point_node.iter().map(|&n| (mesh.nodes[n as usize].coords * MM_TO_M).map(|x| x + 0.0).into()).collect();
 
     let slot_of = |set: &str, ef: &ElementFace| -> Result<usize> {
         let e = ef.element as usize;
