@@ -15,6 +15,7 @@ pub mod inp;
 pub mod material;
 pub mod openfoam;
 pub mod schedule;
+mod sink;
 pub mod template;
 pub mod text;
 pub mod vtu;
@@ -170,26 +171,13 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn std::io::Write) -> 
     .map_err(|e| Error::io(path, "cannot write", e))?;
     let tmp_path = tmp.path().to_path_buf();
     let result = (|| {
-        let mut w = std::io::BufWriter::with_capacity(1 << 20, StopOnSignal(tmp.as_file()));
+        let mut w = sink::Sink::new(tmp.as_file());
         write(&mut w)?;
-        w.into_inner().map_err(|e| e.into_error())?.0.sync_all()?;
+        w.finish()?;
+        tmp.as_file().sync_all()?;
         crate::output::check_interrupted()?;
         tmp.persist(path).map(|_| ()).map_err(|e| e.error)
     })();
     crate::output::forget_partial(&tmp_path);
     result.map_err(|e| Error::io(path, "cannot write", e))
-}
-
-/// A writer that fails once the run is interrupted, so a signal stops a long write within one
-/// buffer.
-struct StopOnSignal<W>(W);
-
-impl<W: std::io::Write> std::io::Write for StopOnSignal<W> {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        crate::output::check_interrupted()?;
-        self.0.write(buf)
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        self.0.flush()
-    }
 }
