@@ -582,9 +582,12 @@ where
         blocks.resize_with(starts.len(), Text::default);
         blocks.par_iter_mut().zip(starts).for_each(|(t, b)| {
             t.clear();
-            for i in b..(b + BLOCK).min(end) {
-                item(t, i);
-            }
+            let items = b..(b + BLOCK).min(end);
+            item(t, items.start);
+            // Room for the block at once, from its first item and a margin (items grow longer
+            // along a list, as their labels do): grown by doubling, a block was copied as it grew.
+            t.bytes.reserve(t.len() * items.len() * 9 / 8 + 64);
+            items.skip(1).for_each(|i| item(t, i));
         });
         blocks
     };
