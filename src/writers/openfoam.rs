@@ -642,6 +642,9 @@ fn write_labels(w: &mut dyn Write, binary: bool, v: &[u32]) -> std::io::Result<(
     }
 }
 
+/// A polyMesh file's writer.
+type FileFn<'a> = Box<dyn Fn(&mut dyn Write) -> std::io::Result<()> + Sync + 'a>;
+
 /// Writes `constant/polyMesh` under `case` and returns the paths written, relative to `case`.
 pub fn write_polymesh(poly: &PolyMesh, binary: bool, case: &Path) -> Result<Vec<PathBuf>> {
     let rel = PathBuf::from("constant/polyMesh");
@@ -655,82 +658,101 @@ pub fn write_polymesh(poly: &PolyMesh, binary: bool, case: &Path) -> Result<Vec<
         poly.faces.len(),
         poly.n_internal()
     );
-    let mut out = Vec::new();
-    let mut file = |name: &str, f: &dyn Fn(&mut dyn Write) -> std::io::Result<()>| -> Result<()> {
-        write_atomic(&dir.join(name), |w| f(w))?;
-        out.push(rel.join(name));
-        Ok(())
-    };
-    file("points", &|w| {
-        header(w, binary, "vectorField", loc, "points", None)?;
-        let points = &poly.points;
-        if binary {
-            binary_list(w, points.len(), |i, out| {
-                [points[i].x, points[i].y, points[i].z].iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))
-            })
-        } else {
-            ascii_list(w, points.len(), |t, i| {
-                let p = points[i];
-                t.byte(b'(').exp(p.x).byte(b' ').exp(p.y).byte(b' ').exp(p.z).byte(b')');
-            })
-        }
-    })?;
-    file("faces", &|w| {
-        let faces = &poly.faces;
-        if binary {
-            header(w, true, "faceCompactList", loc, "faces", None)?;
-            binary_list(w, faces.len() + 1, |i, out| label_bytes(4 * i as u32, out))?;
-            writeln!(w)?;
-            binary_list(w, 4 * faces.len(), |i, out| label_bytes(faces[i / 4][i % 4], out))
-        } else {
-            header(w, false, "faceList", loc, "faces", None)?;
-            ascii_list(w, faces.len(), |t, i| {
-                t.str("4(").uints(faces[i].map(u64::from), " ").byte(b')');
-            })
-        }
-    })?;
-    file("owner", &|w| {
-        header(w, binary, "labelList", loc, "owner", Some(&note))?;
-        write_labels(w, binary, &poly.owner)
-    })?;
-    file("neighbour", &|w| {
-        header(w, binary, "labelList", loc, "neighbour", Some(&note))?;
-        write_labels(w, binary, &poly.neighbour)
-    })?;
-    file("boundary", &|w| {
-        header(w, false, "polyBoundaryMesh", loc, "boundary", None)?;
-        writeln!(w, "{}\n(", poly.patches.len())?;
-        for p in &poly.patches {
-            writeln!(w, "    {}\n    {{\n        type            {};", p.name, p.kind.word())?;
-            if p.kind == PatchKind::Wall {
-                writeln!(w, "        inGroups        1(wall);")?;
-            }
-            writeln!(w, "        nFaces          {};\n        startFace       {};\n    }}", p.size, p.start)?;
-        }
-        writeln!(w, ")")
-    })?;
+    let mut files: Vec<(&str, FileFn)> = vec![
+        ("points", Box::new(|w| write_points(w, poly, binary, loc))),
+        ("faces", Box::new(|w| write_faces(w, poly, binary, loc))),
+        ("owner", Box::new(|w| write_label_file(w, binary, "owner", &note, &poly.owner))),
+        ("neighbour", Box::new(|w| write_label_file(w, binary, "neighbour", &note, &poly.neighbour))),
+        ("boundary", Box::new(|w| write_boundary(w, poly, loc))),
+    ];
     if !poly.cell_zones.is_empty() {
-        file("cellZones", &|w| write_cell_zones(w, loc, "cellZones", &poly.cell_zones))?;
+        files.push(("cellZones", Box::new(|w| write_cell_zones(w, loc, "cellZones", &poly.cell_zones))));
     }
     if !poly.face_zones.is_empty() {
-        file("faceZones", &|w| {
-            header(w, false, "regIOobject", loc, "faceZones", None)?;
-            writeln!(w, "{}\n(", poly.face_zones.len())?;
-            for z in &poly.face_zones {
-                write!(w, "{}\n{{\n    type faceZone;\n    faceLabels List<label> ", z.name)?;
-                ascii_list(w, z.faces.len(), |t, i| {
-                    t.uint(z.faces[i] as u64);
-                })?;
-                write!(w, ";\n    flipMap List<bool> ")?;
-                ascii_list(w, z.flip.len(), |t, i| {
-                    t.byte(b'0' + z.flip[i] as u8);
-                })?;
-                writeln!(w, ";\n}}")?;
-            }
-            writeln!(w, ")")
-        })?;
+        files.push(("faceZones", Box::new(|w| write_face_zones(w, poly, loc))));
     }
-    Ok(out)
+    write_on_two_threads(&dir, &files)?;
+    Ok(files.iter().map(|(name, _)| rel.join(name)).collect())
+}
+
+/// Writes `files` under `dir`: the first (the points, which take about as long as the others
+/// together) on a thread of its own, the others in turn on this one. With two files at once one
+/// file's serial part (the copies into the buffer, the waits on the disk, the sync) overlaps the
+/// other's, and the lists of both format on every core. The error of the first file that failed.
+fn write_on_two_threads(dir: &Path, files: &[(&str, FileFn)]) -> Result<()> {
+    let write = |(name, f): &(&str, FileFn)| write_atomic(&dir.join(name), |w| f(w));
+    let Some((first, rest)) = files.split_first() else { return Ok(()) };
+    std::thread::scope(|s| {
+        let first = s.spawn(|| write(first));
+        let rest = rest.iter().try_for_each(write);
+        first.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)).and(rest)
+    })
+}
+
+/// `owner` or `neighbour` (`object`), with the mesh's sizes in the header's note.
+fn write_label_file(w: &mut dyn Write, binary: bool, object: &str, note: &str, v: &[u32]) -> std::io::Result<()> {
+    header(w, binary, "labelList", "constant/polyMesh", object, Some(note))?;
+    write_labels(w, binary, v)
+}
+
+fn write_points(w: &mut dyn Write, poly: &PolyMesh, binary: bool, loc: &str) -> std::io::Result<()> {
+    header(w, binary, "vectorField", loc, "points", None)?;
+    let points = &poly.points;
+    if binary {
+        binary_list(w, points.len(), |i, out| {
+            [points[i].x, points[i].y, points[i].z].iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))
+        })
+    } else {
+        ascii_list(w, points.len(), |t, i| {
+            let p = points[i];
+            t.byte(b'(').exp(p.x).byte(b' ').exp(p.y).byte(b' ').exp(p.z).byte(b')');
+        })
+    }
+}
+
+fn write_faces(w: &mut dyn Write, poly: &PolyMesh, binary: bool, loc: &str) -> std::io::Result<()> {
+    let faces = &poly.faces;
+    if binary {
+        header(w, true, "faceCompactList", loc, "faces", None)?;
+        binary_list(w, faces.len() + 1, |i, out| label_bytes(4 * i as u32, out))?;
+        writeln!(w)?;
+        binary_list(w, 4 * faces.len(), |i, out| label_bytes(faces[i / 4][i % 4], out))
+    } else {
+        header(w, false, "faceList", loc, "faces", None)?;
+        ascii_list(w, faces.len(), |t, i| {
+            t.str("4(").uints(faces[i].map(u64::from), " ").byte(b')');
+        })
+    }
+}
+
+fn write_boundary(w: &mut dyn Write, poly: &PolyMesh, loc: &str) -> std::io::Result<()> {
+    header(w, false, "polyBoundaryMesh", loc, "boundary", None)?;
+    writeln!(w, "{}\n(", poly.patches.len())?;
+    for p in &poly.patches {
+        writeln!(w, "    {}\n    {{\n        type            {};", p.name, p.kind.word())?;
+        if p.kind == PatchKind::Wall {
+            writeln!(w, "        inGroups        1(wall);")?;
+        }
+        writeln!(w, "        nFaces          {};\n        startFace       {};\n    }}", p.size, p.start)?;
+    }
+    writeln!(w, ")")
+}
+
+fn write_face_zones(w: &mut dyn Write, poly: &PolyMesh, loc: &str) -> std::io::Result<()> {
+    header(w, false, "regIOobject", loc, "faceZones", None)?;
+    writeln!(w, "{}\n(", poly.face_zones.len())?;
+    for z in &poly.face_zones {
+        write!(w, "{}\n{{\n    type faceZone;\n    faceLabels List<label> ", z.name)?;
+        ascii_list(w, z.faces.len(), |t, i| {
+            t.uint(z.faces[i] as u64);
+        })?;
+        write!(w, ";\n    flipMap List<bool> ")?;
+        ascii_list(w, z.flip.len(), |t, i| {
+            t.byte(b'0' + z.flip[i] as u8);
+        })?;
+        writeln!(w, ";\n}}")?;
+    }
+    writeln!(w, ")")
 }
 
 fn write_cell_zones(
