@@ -149,9 +149,10 @@ pub fn write_text_file(dir: &Path, rel: &str, text: &str, executable: bool) -> R
 }
 
 /// Writes a file through a temporary file beside it (a fresh random name, created exclusively,
-/// so a link planted there is never followed) renamed over `path` when complete: an interrupted
-/// write never leaves a half-written file under the final name, and a signal removes the
-/// temporary file (see [`crate::output`]); a write after the signal fails.
+/// so a link planted there is never followed) renamed over `path` when complete and synced: an
+/// interrupted write never leaves a half-written file under the final name, and a signal removes
+/// the temporary file (see [`crate::output`]); a write after the signal fails. The bytes go
+/// through a [`sink::Sink`]: whole buffers past the page cache where the system allows it.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<()> {
     use crate::error::Error;
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));

@@ -202,8 +202,8 @@ const FIVES: [u128; 32] = {
 /// The 13 significant digits of `{:.12e}` of `a` (> 0, normal) and their exponent, found
 /// exactly in integers: a x 10^q = m x 5^q x 2^(e + q) for a = m x 2^e, its integer part and
 /// remainder by a shift. Through zmij's shortest digits (the text, read back, rounded), `exp12`
-/// cost three times `display`, and the Abaqus and CalculiX decks write some five million such
-/// numbers at 0.8 M hexes. `None` where std decides: q outside 0..=31 (`a` outside about
+/// cost three times `display`, and the three CalculiX and Abaqus decks write some seven million
+/// such numbers at 0.8 M hexes. `None` where std decides: q outside 0..=31 (`a` outside about
 /// [1e-19, 1e13)), zero, subnormals, non-finite values, and a remainder of exactly one half,
 /// where the rounding of a tie is std's to choose.
 fn thirteen_digits(a: f64) -> Option<(u64, i32)> {
