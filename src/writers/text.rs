@@ -88,7 +88,7 @@ impl Shortest {
         let value = (4 * m) as u128 * five;
         let upper = value + 2 * five;
         let lower = value - if fraction == 0 && biased > 1 { five } else { 2 * five };
-        let (inclusive, mask) = (m % 2 == 0, (1u128 << shift) - 1);
+        let (inclusive, mask) = (m.is_multiple_of(2), (1u128 << shift) - 1);
         let hi = (upper >> shift) as u64 - (!inclusive && upper & mask == 0) as u64;
         let lo = (lower >> shift) as u64 + (!inclusive || lower & mask != 0) as u64;
         let (mut t, mut zeros) = (1u64, 0);
@@ -397,7 +397,7 @@ impl Text {
         let (negative, e) = ((exp < 0) as u64, exp.unsigned_abs()); // |exp| < 1000
         let e_len = decimal_len(e as u64) as u64;
         let e_digits = eight_digits(e % 100_000_000) >> (8 * (8 - e_len));
-        let tail = b'e' as u64 | negative * ((b'-' as u64) << 8) | e_digits << (8 * (1 + negative));
+        let tail = b'e' as u64 | (negative * ((b'-' as u64) << 8)) | e_digits << (8 * (1 + negative));
         self.bytes.reserve(32);
         // SAFETY: 32 bytes from `start` are reserved: the digits take 1 + 24 at most, the tail 8
         // from at most 21; the first len + 1 + negative + e_len are written and become the text.
@@ -715,7 +715,7 @@ mod tests {
             let x = match i % 4 {
                 0 => f64::from_bits(g.next()),
                 1 => ((g.next() >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 10f64.powi((g.next() % 36) as i32 - 18),
-                2 => 2f64.powi((g.next() % 120) as i32 - 60) * if g.next() % 2 == 0 { 1.0 } else { -1.0 },
+                2 => 2f64.powi((g.next() % 120) as i32 - 60) * if g.next().is_multiple_of(2) { 1.0 } else { -1.0 },
                 _ => f64::from_bits(g.next() % (1 << 20) + ((g.next() % 200 + 924) << 52)),
             };
             if !x.is_finite() {
