@@ -130,6 +130,8 @@ pub struct Triad {
 pub struct ElementQuality {
     pub scaled_jacobian: f64,
     pub equiangle_skew: f64,
+    /// The smallest face pyramid over a sixth of the volume ([`crate::quality::face_pyramid_ratio`]).
+    pub face_pyramid: f64,
 }
 
 /// A wall layer as the writers need it.

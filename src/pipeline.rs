@@ -155,21 +155,24 @@ struct FinishQuality {
 impl FinishQuality {
     /// A whole mesh's figures (its quality annotated).
     fn of_mesh(mesh: &VesselMesh) -> FinishQuality {
-        let sj: Vec<f64> = mesh.quality.iter().map(|q| q.scaled_jacobian).collect();
-        FinishQuality::of(mesh, &sj, |_| true)
+        let validity: Vec<f64> =
+            mesh.quality.iter().map(|q| crate::quality::validity_from(q.scaled_jacobian, q.face_pyramid)).collect();
+        FinishQuality::of(mesh, &validity, |_| true)
     }
 
-    /// The figures from each element's scaled Jacobian: the worst of the elements `judged`, the
+    /// The figures from each element's validity (its scaled Jacobian while its face pyramids are
+    /// positive, see [`crate::quality::validity`]: a finish whose wall has a cell that checkMesh
+    /// fails loses as one with an inverted cell would): the worst of the elements `judged`, the
     /// worst of those in the wall, the mean over the wall (summed in element order, whatever the
     /// thread count).
-    fn of(mesh: &VesselMesh, sj: &[f64], judged: impl Fn(usize) -> bool) -> FinishQuality {
+    fn of(mesh: &VesselMesh, validity: &[f64], judged: impl Fn(usize) -> bool) -> FinishQuality {
         let worst = |in_wall: bool| {
-            (0..sj.len())
+            (0..validity.len())
                 .filter(|&e| judged(e) && (!in_wall || mesh.regions[e].is_wall()))
-                .map(|e| sj[e])
+                .map(|e| validity[e])
                 .fold(f64::INFINITY, f64::min)
         };
-        let wall = &sj[mesh.wall_range()];
+        let wall = &validity[mesh.wall_range()];
         let wall_mean = wall.iter().map(|q| q.max(-1.0)).sum::<f64>() / wall.len().max(1) as f64;
         FinishQuality { worst: worst(false), worst_wall: worst(true), wall_mean }
     }
@@ -606,7 +609,7 @@ pub fn mesh_tree(
                 if junction_of[e].is_none() && !mesh.regions[e].is_wall() {
                     return f64::INFINITY;
                 }
-                let q = crate::quality::scaled_jacobian(&mesh.corners(e));
+                let q = crate::quality::validity(&mesh.corners(e));
                 if q.is_nan() {
                     f64::NEG_INFINITY
                 } else {

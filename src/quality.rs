@@ -11,14 +11,18 @@
 //!   CFD practice asks for a mean below 0.4.
 
 /// The quality bars a mesh is promised to meet (checked in [`crate::report::Bars`]): worst
-/// scaled Jacobian, wall mean scaled Jacobian, lumen mean equi-angle skew. FEA practice wants a
-/// wall mean above 0.8 and CFD a lumen skew below 0.4; these are vesselhex's own, tighter.
+/// scaled Jacobian, wall mean scaled Jacobian, lumen mean equi-angle skew, and every face
+/// pyramid positive. FEA practice wants a wall mean above 0.8 and CFD a lumen skew below 0.4;
+/// these are vesselhex's own, tighter. The pyramids are OpenFOAM's: checkMesh fails a mesh with
+/// one that is not positive, whatever its scaled Jacobians.
 pub struct Bars;
 
 impl Bars {
     pub const MIN_SCALED_JACOBIAN: f64 = 0.2;
     pub const WALL_MEAN_SCALED_JACOBIAN: f64 = 0.85;
     pub const LUMEN_MEAN_SKEW: f64 = 0.35;
+    /// The face-pyramid ratio ([`face_pyramid_ratio`]) must be above this.
+    pub const MIN_FACE_PYRAMID: f64 = 0.0;
 }
 
 use crate::mesh::{ElementQuality, HEX_CORNER_NEIGHBOURS, HEX_FACES};
@@ -79,8 +83,119 @@ pub fn equiangle_skew(c: &[Point3<f64>; 8]) -> f64 {
     ((largest - 90.0) / 90.0).max((90.0 - smallest) / 90.0).clamp(0.0, 1.0)
 }
 
+/// Face-pyramid ratio of a hexahedron: the smallest of its six face pyramids as OpenFOAM builds
+/// them, over a sixth of the cell's volume (1 for any parallelepiped, whose six pyramids are
+/// equal). OpenFOAM's checkMesh fails a mesh with any negative pyramid ("Error in face
+/// pyramids"), and the scaled Jacobian does not see one: a cell thinner than the warp of its
+/// faces has every corner right-handed while its centre lies outside a face's plane
+/// (gmsh_bifurcation at medium: a lumen cell 0.3-43 um thick at the wall, whose wall face is
+/// warped by 51 um, had a pyramid of -1.02 sixths with a scaled Jacobian of 0.30).
+///
+/// The figures are OpenFOAM's (`primitiveMesh`, v1912): a face's centre is the area-weighted
+/// centroid of the triangles about its mean point and its area vector half the cross product of
+/// the diagonals; the cell's centre is the volume-weighted centroid of the face pyramids about
+/// the mean of the face centres; a face's pyramid is S_f . (C_f - C_c) / 3 with the outward
+/// area. A cell without positive volume gives -1.
+pub fn face_pyramid_ratio(c: &[Point3<f64>; 8]) -> f64 {
+    face_pyramids(c).into_iter().fold(f64::INFINITY, f64::min)
+}
+
+/// The six face pyramids of [`face_pyramid_ratio`], each over a sixth of the volume, in
+/// [`HEX_FACES`] order; all -1 for a cell without positive volume.
+pub fn face_pyramids(c: &[Point3<f64>; 8]) -> [f64; 6] {
+    let mut centres = [Vector3::zeros(); 6];
+    let mut areas = [Vector3::zeros(); 6];
+    for (f, face) in HEX_FACES.iter().enumerate() {
+        let p = face.map(|i| c[i]);
+        centres[f] = polygon_centre(&p.map(|q| q.coords));
+        areas[f] = crate::mesh::quad_area_vector(p);
+    }
+    let estimate = (centres[0] + centres[1] + centres[2] + centres[3] + centres[4] + centres[5]) / 6.0;
+    // Three times each pyramid's volume from the estimate, and their centroids: the cell centre.
+    let (mut weighted, mut volume3) = (Vector3::zeros(), 0.0);
+    for (centre, area) in centres.iter().zip(&areas) {
+        let v = area.dot(&(centre - estimate));
+        weighted += (centre * 0.75 + estimate * 0.25) * v;
+        volume3 += v;
+    }
+    if volume3.is_nan() || volume3 <= 0.0 {
+        return [-1.0; 6];
+    }
+    let cell_centre = weighted / volume3;
+    std::array::from_fn(|f| 6.0 * areas[f].dot(&(centres[f] - cell_centre)) / volume3)
+}
+
+/// What the optimisers count as an element's validity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Validity {
+    /// Its corners alone: the scaled Jacobian.
+    Corners,
+    /// Its corners and OpenFOAM's face pyramids: [`validity`].
+    CornersAndPyramids,
+}
+
+impl Validity {
+    /// The element's validity when it is above `floor`; otherwise some value at most `floor`.
+    pub fn unless_below(self, c: &[Point3<f64>; 8], floor: f64) -> f64 {
+        match self {
+            Validity::Corners => scaled_jacobian_unless_below(c, floor),
+            Validity::CornersAndPyramids => validity_unless_below(c, floor),
+        }
+    }
+}
+
+/// An element's validity for the optimisers: its scaled Jacobian while every face pyramid is
+/// positive, else its smallest pyramid (not positive). Corners alone do not make a cell valid
+/// for a finite-volume solver: a cell thinner than the warp of its faces has every corner
+/// right-handed while its centre lies outside a face's plane, which checkMesh fails as it fails
+/// an inverted cell; here it counts as inverted too.
+pub fn validity(c: &[Point3<f64>; 8]) -> f64 {
+    validity_unless_below(c, f64::NEG_INFINITY)
+}
+
+/// [`validity`] when it is above `floor`; otherwise some value at most `floor` (the scaled
+/// Jacobian's early answer, before the pyramids are built).
+pub fn validity_unless_below(c: &[Point3<f64>; 8], floor: f64) -> f64 {
+    let sj = scaled_jacobian_unless_below(c, floor);
+    if sj.is_nan() || sj <= floor {
+        return sj;
+    }
+    validity_from(sj, face_pyramid_ratio(c))
+}
+
+/// [`validity`] from an element's scaled Jacobian and face-pyramid ratio.
+pub fn validity_from(scaled_jacobian: f64, face_pyramid: f64) -> f64 {
+    if face_pyramid > Bars::MIN_FACE_PYRAMID {
+        scaled_jacobian
+    } else {
+        scaled_jacobian.min(face_pyramid)
+    }
+}
+
+/// OpenFOAM's centre of a quadrilateral: the centroids of the triangles about its mean point,
+/// weighted by their areas.
+fn polygon_centre(p: &[Vector3<f64>; 4]) -> Vector3<f64> {
+    let mean = (p[0] + p[1] + p[2] + p[3]) * 0.25;
+    let (mut weighted, mut area) = (Vector3::zeros(), 0.0);
+    for k in 0..4 {
+        let (a, b) = (p[k], p[(k + 1) % 4]);
+        let w = (b - a).cross(&(mean - a)).norm();
+        weighted += (a + b + mean) * w;
+        area += w;
+    }
+    if area > 0.0 {
+        weighted / (3.0 * area)
+    } else {
+        mean
+    }
+}
+
 pub fn element_quality(c: &[Point3<f64>; 8]) -> ElementQuality {
-    ElementQuality { scaled_jacobian: scaled_jacobian(c), equiangle_skew: equiangle_skew(c) }
+    ElementQuality {
+        scaled_jacobian: scaled_jacobian(c),
+        equiangle_skew: equiangle_skew(c),
+        face_pyramid: face_pyramid_ratio(c),
+    }
 }
 
 /// Minimum, mean and maximum of a set of values.
@@ -109,7 +224,7 @@ impl Stats {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// The skew from all 24 angles, as it was computed before only the extreme cosines were.
@@ -147,6 +262,51 @@ mod tests {
         let mut c = crate::mesh::unit_cube();
         c[1] = c[0]; // a degenerate corner
         assert_eq!(equiangle_skew(&c).to_bits(), skew_of_every_angle(&c).to_bits());
+    }
+
+    /// A slab over a saddle (corners alternately `warp` above and below the unit square's
+    /// plane), `thickness[i]` thick over corner i: the inner face is corners 0-3 and the outer
+    /// 4-7, as a lumen cell's would be at a warped wall.
+    pub(crate) fn warped_slab(warp: f64, thickness: [f64; 4]) -> [Point3<f64>; 8] {
+        let square = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)];
+        std::array::from_fn(|i| {
+            let (x, y) = square[i % 4];
+            let z = warp * (2.0 * x - 1.0) * (2.0 * y - 1.0);
+            Point3::new(x, y, if i < 4 { z } else { z + thickness[i % 4] })
+        })
+    }
+
+    /// Every corner right-handed, yet a face pyramid of the wrong sign: a cell thinner than the
+    /// warp of its faces, thick only over one corner, has its centre outside its outer face's
+    /// plane. checkMesh fails such a cell; the scaled Jacobian passes it.
+    #[test]
+    fn a_cell_thinner_than_its_warp_has_a_negative_pyramid_with_right_corners() {
+        let slab = warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]);
+        assert!(scaled_jacobian(&slab) > 0.9, "{}", scaled_jacobian(&slab));
+        let pyramids = face_pyramids(&slab);
+        assert!(pyramids[crate::mesh::FACE_DOWNSTREAM] < -1.0, "{pyramids:?}");
+        assert!(face_pyramid_ratio(&slab) < 0.0);
+        assert!(validity(&slab) < 0.0, "a negative pyramid counts as an inverted element");
+        // As thick everywhere as over that corner, the same warp is harmless.
+        let even = warped_slab(0.1, [0.1; 4]);
+        assert!(face_pyramid_ratio(&even) > 0.9 && validity(&even) == scaled_jacobian(&even));
+    }
+
+    #[test]
+    fn a_parallelepiped_has_six_equal_pyramids() {
+        let mut c = crate::mesh::unit_cube();
+        for p in c[4..].iter_mut() {
+            *p += nalgebra::Vector3::new(0.7, -0.3, 0.0);
+        }
+        for p in c.iter_mut() {
+            p.y *= 0.01;
+        }
+        for r in face_pyramids(&c) {
+            assert!((r - 1.0).abs() < 1e-9, "{:?}", face_pyramids(&c));
+        }
+        let mut m = crate::mesh::unit_cube();
+        m.iter_mut().for_each(|p| p.z = -p.z);
+        assert_eq!(face_pyramids(&m), [-1.0; 6], "an inverted cell");
     }
 
     #[test]

@@ -13,6 +13,9 @@ pub struct RegionReport {
     pub nodes: usize,
     pub scaled_jacobian: Stats,
     pub equiangle_skew: Stats,
+    /// OpenFOAM's face pyramids ([`crate::quality::face_pyramid_ratio`]): checkMesh fails a mesh
+    /// whose minimum is not positive.
+    pub face_pyramid: Stats,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -182,6 +185,7 @@ pub fn bar_warnings(mesh: &VesselMesh) -> Vec<Warning> {
             ),
         ));
     }
+    out.extend(pyramid_warning(mesh));
     if wall.all.elements > 0 && wall.all.scaled_jacobian.mean < Bars::WALL_MEAN_SCALED_JACOBIAN {
         out.push(Warning::new(
             "quality_bar",
@@ -205,12 +209,40 @@ pub fn bar_warnings(mesh: &VesselMesh) -> Vec<Warning> {
     out
 }
 
+/// The warning for elements whose face pyramids are not all positive: OpenFOAM's checkMesh fails
+/// such a mesh ("Error in face pyramids") whatever its scaled Jacobians, so it is not within the
+/// bars.
+fn pyramid_warning(mesh: &VesselMesh) -> Option<Warning> {
+    let (e, q) = mesh.quality.iter().enumerate().min_by(|a, b| a.1.face_pyramid.total_cmp(&b.1.face_pyramid))?;
+    if q.face_pyramid > Bars::MIN_FACE_PYRAMID {
+        return None;
+    }
+    let below =
+        mesh.quality.iter().filter(|q| q.face_pyramid.is_nan() || q.face_pyramid <= Bars::MIN_FACE_PYRAMID).count();
+    let c = crate::mesh::element_centre(&mesh.corners(e));
+    Some(Warning::new(
+        "quality_bar",
+        format!(
+            "element {} ({}, branch {}) near ({:.3}, {:.3}, {:.3}) mm has a face pyramid of {:.3} (a sixth of its volume \
+             is 1): OpenFOAM's checkMesh fails a cell whose centre lies outside a face's plane; {below} element(s) so",
+            e + 1,
+            mesh.regions[e].name(),
+            mesh.branch_of[e],
+            c.x,
+            c.y,
+            c.z,
+            q.face_pyramid
+        ),
+    ))
+}
+
 fn region_report(mesh: &VesselMesh, range: std::ops::Range<usize>) -> RegionReport {
     RegionReport {
         elements: range.len(),
         nodes: mesh.nodes_of(range.clone()).len(),
         scaled_jacobian: Stats::of(mesh.quality[range.clone()].iter().map(|q| q.scaled_jacobian)),
-        equiangle_skew: Stats::of(mesh.quality[range].iter().map(|q| q.equiangle_skew)),
+        equiangle_skew: Stats::of(mesh.quality[range.clone()].iter().map(|q| q.equiangle_skew)),
+        face_pyramid: Stats::of(mesh.quality[range].iter().map(|q| q.face_pyramid)),
     }
 }
 
