@@ -32,7 +32,7 @@ const MAX_STEP: f64 = 0.25;
 const GRADIENT_STEP: f64 = 1e-5;
 /// Face-pyramid ratios below this are penalised (a sixth of the volume is 1; over the cohort,
 /// healthy cells reach a few hundredths where a wall layer tapers into a crotch).
-const PYRAMID_TARGET: f64 = 0.03;
+pub const PYRAMID_TARGET: f64 = 0.03;
 /// Face pyramids below this count as this in the penalty: as the cell's volume vanishes its
 /// pyramids over it grow without bound (-10^4 in a crotch's wall), and would swamp every other
 /// term; the corners' terms see such a cell anyway.
@@ -89,7 +89,10 @@ pub fn element_penalty(c: &[Point3<f64>; 8], size: f64, validity: Validity) -> f
 /// OpenFOAM's zero keeps the max-min search that follows, which refuses only a pyramid that is
 /// not positive, away from it.
 fn pyramid_penalty(c: &[Point3<f64>; 8]) -> f64 {
-    crate::quality::face_pyramids(c)
+    // A cell without positive volume costs the most on every face, so that turning its volume
+    // positive never costs (its corners' terms untangle it).
+    let pyramids = crate::quality::face_pyramids_of_positive_volume(c).unwrap_or([LEAST_PYRAMID; 6]);
+    pyramids
         .iter()
         .map(|r| {
             let short = TARGET * (1.0 - r.max(LEAST_PYRAMID) / PYRAMID_TARGET).max(0.0);
@@ -98,7 +101,7 @@ fn pyramid_penalty(c: &[Point3<f64>; 8]) -> f64 {
         .sum()
 }
 
-/// Minimises the summed penalty of `elements` (their `validity`'s terms) over the nodes whose
+/// Minimises the summed penalty of `elements` (each by its `validity`'s terms) over the nodes whose
 /// `freedom` is not [`Freedom::Fixed`] (nodes beyond `freedom`'s length are fixed). Sequential,
 /// in node order, so the result does not depend on the thread count.
 pub fn optimise_nodes(
@@ -106,7 +109,7 @@ pub fn optimise_nodes(
     elements: &[Hex],
     freedom: &[Freedom],
     surface: &LumenSurface,
-    validity: Validity,
+    validity: &[Validity],
 ) {
     let is_free = |n: u32| freedom.get(n as usize).is_some_and(|f| *f != Freedom::Fixed);
     let mut incident: Vec<Vec<u32>> = vec![Vec::new(); freedom.len()];
@@ -138,7 +141,7 @@ pub fn optimise_nodes(
     let local = |nodes: &[Point3<f64>], n: u32| -> f64 {
         incident[n as usize]
             .iter()
-            .map(|&e| element_penalty(&elements[e as usize].map(|m| nodes[m as usize]), size[e as usize], validity))
+            .map(|&e| element_penalty(&elements[e as usize].map(|m| nodes[m as usize]), size[e as usize], validity[e as usize]))
             .sum()
     };
     // The shortest edge at each free node, from the start (the step's scale).
@@ -300,7 +303,7 @@ mod tests {
             freedom[n] = Freedom::Free;
         }
         let surface = surface();
-        optimise_nodes(&mut nodes, &hexes, &freedom, &surface, Validity::Corners);
+        optimise_nodes(&mut nodes, &hexes, &freedom, &surface, &[Validity::Corners; 2]);
         for h in &hexes {
             assert!(scaled_jacobian(&corners(&nodes, h)) > TARGET, "{:?}", corners(&nodes, h));
         }
@@ -317,7 +320,7 @@ mod tests {
         let hexes: Vec<Hex> = vec![[0, 1, 2, 3, 4, 5, 6, 7]];
         let mut freedom = vec![Freedom::Fixed; 8];
         freedom[4..].fill(Freedom::Free);
-        optimise_nodes(&mut nodes, &hexes, &freedom, &surface(), Validity::CornersAndPyramids);
+        optimise_nodes(&mut nodes, &hexes, &freedom, &surface(), &[Validity::CornersAndPyramids]);
         let c = hexes[0].map(|n| nodes[n as usize]);
         let pyramids = crate::quality::face_pyramids(&c);
         assert!(crate::quality::validity(&c) > 0.2 && pyramids.iter().all(|&r| r > 0.05), "{pyramids:?}");
@@ -334,7 +337,7 @@ mod tests {
         let surface = surface();
         let before = scaled_jacobian(&hexes[0].map(|n| nodes[n as usize]));
         assert!(before < TARGET, "{before}");
-        optimise_nodes(&mut nodes, &hexes, &freedom, &surface, Validity::Corners);
+        optimise_nodes(&mut nodes, &hexes, &freedom, &surface, &[Validity::Corners]);
         assert_eq!(nodes[6].z, 1.0);
         let after = scaled_jacobian(&hexes[0].map(|n| nodes[n as usize]));
         assert!(after > before, "{before} -> {after} at {:?}", nodes[6]);

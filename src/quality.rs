@@ -103,6 +103,12 @@ pub fn face_pyramid_ratio(c: &[Point3<f64>; 8]) -> f64 {
 /// The six face pyramids of [`face_pyramid_ratio`], each over a sixth of the volume, in
 /// [`HEX_FACES`] order; all -1 for a cell without positive volume.
 pub fn face_pyramids(c: &[Point3<f64>; 8]) -> [f64; 6] {
+    face_pyramids_of_positive_volume(c).unwrap_or([-1.0; 6])
+}
+
+/// The six face pyramids of [`face_pyramids`], or `None` for a cell without positive volume
+/// (whose pyramids have no sixth of a volume to be measured by).
+pub fn face_pyramids_of_positive_volume(c: &[Point3<f64>; 8]) -> Option<[f64; 6]> {
     let mut centres = [Vector3::zeros(); 6];
     let mut areas = [Vector3::zeros(); 6];
     for (f, face) in HEX_FACES.iter().enumerate() {
@@ -119,10 +125,10 @@ pub fn face_pyramids(c: &[Point3<f64>; 8]) -> [f64; 6] {
         volume3 += v;
     }
     if volume3.is_nan() || volume3 <= 0.0 {
-        return [-1.0; 6];
+        return None;
     }
     let cell_centre = weighted / volume3;
-    std::array::from_fn(|f| 6.0 * areas[f].dot(&(centres[f] - cell_centre)) / volume3)
+    Some(std::array::from_fn(|f| 6.0 * areas[f].dot(&(centres[f] - cell_centre)) / volume3))
 }
 
 /// What the optimisers count as an element's validity.
@@ -145,7 +151,7 @@ impl Validity {
 }
 
 /// An element's validity for the optimisers: its scaled Jacobian while every face pyramid is
-/// positive, else its smallest pyramid (not positive). Corners alone do not make a cell valid
+/// positive or the element is inverted, else its smallest pyramid (not positive). Corners alone do not make a cell valid
 /// for a finite-volume solver: a cell thinner than the warp of its faces has every corner
 /// right-handed while its centre lies outside a face's plane, which checkMesh fails as it fails
 /// an inverted cell; here it counts as inverted too.
@@ -163,9 +169,11 @@ pub fn validity_unless_below(c: &[Point3<f64>; 8], floor: f64) -> f64 {
     validity_from(sj, face_pyramid_ratio(c))
 }
 
-/// [`validity`] from an element's scaled Jacobian and face-pyramid ratio.
+/// [`validity`] from an element's scaled Jacobian and face-pyramid ratio. An inverted element is
+/// measured by its scaled Jacobian, so that the optimisers see it being untangled (its pyramids
+/// are all -1 until its volume turns positive).
 pub fn validity_from(scaled_jacobian: f64, face_pyramid: f64) -> f64 {
-    if face_pyramid > Bars::MIN_FACE_PYRAMID {
+    if face_pyramid > Bars::MIN_FACE_PYRAMID || !(scaled_jacobian > 0.0) {
         scaled_jacobian
     } else {
         scaled_jacobian.min(face_pyramid)

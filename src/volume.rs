@@ -13,7 +13,7 @@ use crate::mesh::{
     sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, WallLayer, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER,
     FACE_UPSTREAM, HEX_EDGES,
 };
-use crate::node_optimisation::{optimise_nodes, Freedom};
+use crate::node_optimisation::{optimise_nodes, Freedom, PYRAMID_TARGET};
 use crate::projection::{BranchEnd, ProjectedBranch};
 use crate::quality::Validity;
 use crate::surface::LumenSurface;
@@ -401,7 +401,8 @@ pub fn build_volume(
         }
     }
     regions.resize(hexes.len(), Region::Lumen);
-    improve_junction_nodes(&mut nodes, &hexes, &movable, surface, optimisation.pattern_search, Validity::Corners);
+    let by_corners = vec![Validity::Corners; hexes.len()];
+    improve_junction_nodes(&mut nodes, &hexes, &movable, surface, optimisation.pattern_search, &by_corners);
     // The lumen is OpenFOAM's mesh: its poor elements are judged with the face pyramids too, and
     // optimised with them in the objective. By the corners alone, the optimisation flattened a
     // crotch cell of gmsh_bifurcation (medium) until its centre left its wall face's plane.
@@ -619,7 +620,7 @@ fn improve_junction_nodes(
     movable: &[Freedom],
     surface: &LumenSurface,
     pattern_search: bool,
-    validity: Validity,
+    validity: &[Validity],
 ) {
     let free: Vec<u32> = (0..movable.len() as u32).filter(|&i| movable[i as usize] != Freedom::Fixed).collect();
     if free.is_empty() {
@@ -665,12 +666,12 @@ fn improve_junction_nodes(
             (n, nb)
         })
         .collect();
-    // The worst element by `validity`, or, once it is at most `floor`, some value at most
-    // `floor`: a trial move is only ever compared with a floor.
+    // The worst element, each by its `validity`, or, once it is at most `floor`, some value at
+    // most `floor`: a trial move is only ever compared with a floor.
     let worst = |nodes: &[Point3<f64>], elements: &[usize], floor: f64| -> f64 {
         let mut min = f64::INFINITY;
         for &e in elements {
-            min = min.min(validity.unless_below(&lumen[e].map(|n| nodes[n as usize]), floor));
+            min = min.min(validity[e].unless_below(&lumen[e].map(|n| nodes[n as usize]), floor));
             if min <= floor {
                 break;
             }
@@ -797,8 +798,16 @@ const POOR_REACH: usize = 2;
 /// Rounds of [`improve_poor`]: each frees the nodes around what is still poor.
 const POOR_ROUNDS: usize = 3;
 
-/// Frees the nodes within [`POOR_REACH`] elements of every element whose `validity` is below
-/// [`QUALITY_BAR_SJ`], wherever it is (a bend, a narrowing, a sac, a funnel the junction
+/// Face-pyramid ratios below this put an element's pyramids in the optimisers' sight (see
+/// [`watch_pyramids`]). A parallelepiped's are 1, and the cells of a healthy lumen are near it;
+/// counting the pyramids of every element doubled the CPU time of the branched trees at medium.
+const PYRAMID_WATCH: f64 = 0.5;
+/// Passes of a round's optimisation after its first while elements newly fall below
+/// [`PYRAMID_WATCH`].
+const WATCH_PASSES: usize = 2;
+
+/// Frees the nodes within [`POOR_REACH`] elements of every element whose validity (`judged`) is
+/// below [`QUALITY_BAR_SJ`], wherever it is (a bend, a narrowing, a sac, a funnel the junction
 /// optimisation left folded), as `mobility` allows, and raises the worst element among them
 /// (`improve_junction_nodes`; in the lumen, inner nodes move freely, surface nodes slide on the
 /// triangles, vessel-end sections stay). Untangling comes first by construction: the objective
@@ -812,17 +821,19 @@ fn improve_poor(
     elements: &[Hex],
     mobility: &[Freedom],
     surface: &LumenSurface,
-    validity: Validity,
+    judged: Validity,
 ) {
     let poor = |nodes: &[Point3<f64>]| -> Vec<usize> {
         (0..elements.len())
             .into_par_iter()
             .filter(|&e| {
-                let q = validity.unless_below(&elements[e].map(|n| nodes[n as usize]), QUALITY_BAR_SJ);
+                let q = judged.unless_below(&elements[e].map(|n| nodes[n as usize]), QUALITY_BAR_SJ);
                 q.is_nan() || q <= QUALITY_BAR_SJ
             })
             .collect()
     };
+    // What the optimisers count of each element: its corners, and its pyramids once watched.
+    let mut validity = vec![Validity::Corners; elements.len()];
     let mut element_of: Vec<Vec<u32>> = Vec::new();
     for _ in 0..POOR_ROUNDS {
         let seeds = poor(nodes);
@@ -837,40 +848,87 @@ fn improve_poor(
                 }
             }
         }
-        let mut near = vec![false; mobility.len()];
-        let mut front: Vec<usize> = seeds;
-        for _ in 0..POOR_REACH {
-            let mut next = Vec::new();
-            for e in front {
-                for &n in &elements[e] {
-                    if !std::mem::replace(&mut near[n as usize], true) {
-                        next.extend(element_of[n as usize].iter().map(|&e| e as usize));
-                    }
-                }
-            }
-            front = next;
-        }
-        let free: Vec<Freedom> =
-            near.iter().zip(mobility).map(|(&near, &m)| if near { m } else { Freedom::Fixed }).collect();
-        let before = worst_of(nodes, elements, &free, validity);
+        let free = nodes_near(elements, mobility, &element_of, seeds);
+        let before = worst_of(nodes, elements, &free, judged);
         // The penalty untangles and lifts every poor corner at once; the max-min search after
         // it only takes moves that raise the worst element, which the penalty's sum may have
         // traded (at coarse, without it: the coronary tree 0.245 -> 0.158, the cerebral tree
         // 0.205 -> 0.070; without the penalty, gmsh_cerebral_aneurysm at medium stays inverted).
-        optimise_nodes(nodes, elements, &free, surface, validity);
-        improve_junction_nodes(nodes, elements, &free, surface, true, validity);
-        if worst_of(nodes, elements, &free, validity) <= before + STALLED_GAIN {
+        let mut moving = free.clone();
+        watch_pyramids(nodes, elements, &free, judged, PYRAMID_WATCH, &mut validity);
+        for _ in 0..=WATCH_PASSES {
+            optimise_nodes(nodes, elements, &moving, surface, &validity);
+            improve_junction_nodes(nodes, elements, &moving, surface, true, &validity);
+            // Elements the pass took below the pyramids' target out of sight: their
+            // neighbourhood again, with their pyramids in sight.
+            let fallen = watch_pyramids(nodes, elements, &free, judged, PYRAMID_TARGET, &mut validity);
+            if fallen.is_empty() {
+                break;
+            }
+            watch_pyramids(nodes, elements, &free, judged, PYRAMID_WATCH, &mut validity);
+            moving = nodes_near(elements, &free, &element_of, fallen);
+        }
+        if worst_of(nodes, elements, &free, judged) <= before + STALLED_GAIN {
             return;
         }
     }
 }
 
-/// The worst `validity` of the elements with a movable node.
-fn worst_of(nodes: &[Point3<f64>], elements: &[Hex], movable: &[Freedom], validity: Validity) -> f64 {
+/// Each node's freedom within [`POOR_REACH`] elements of the `seeds` (as `mobility` allows),
+/// fixed elsewhere.
+fn nodes_near(elements: &[Hex], mobility: &[Freedom], element_of: &[Vec<u32>], seeds: Vec<usize>) -> Vec<Freedom> {
+    let mut near = vec![false; mobility.len()];
+    let mut front: Vec<usize> = seeds;
+    for _ in 0..POOR_REACH {
+        let mut next = Vec::new();
+        for e in front {
+            for &n in &elements[e] {
+                if !std::mem::replace(&mut near[n as usize], true) {
+                    next.extend(element_of[n as usize].iter().map(|&e| e as usize));
+                }
+            }
+        }
+        front = next;
+    }
+    near.iter().zip(mobility).map(|(&near, &m)| if near { m } else { Freedom::Fixed }).collect()
+}
+
+/// Puts the face pyramids of the elements with a `free` node whose smallest pyramid is `below`
+/// in `validity` (when `judged` counts pyramids); returns those that were not there yet. Those
+/// below [`PYRAMID_WATCH`] are watched before a pass: an element far above it is not pushed to a
+/// pyramid that is not positive within one (a node moves by at most a quarter of its shortest
+/// edge per sweep); one that still falls below the penalty's target ([`PYRAMID_TARGET`]) out of
+/// sight gets a pass around it.
+fn watch_pyramids(
+    nodes: &[Point3<f64>],
+    elements: &[Hex],
+    free: &[Freedom],
+    judged: Validity,
+    below: f64,
+    validity: &mut [Validity],
+) -> Vec<usize> {
+    if judged == Validity::Corners {
+        return Vec::new();
+    }
+    let mut newly = Vec::new();
+    for (e, h) in elements.iter().enumerate() {
+        if validity[e] != judged
+            && h.iter().any(|&n| free[n as usize] != Freedom::Fixed)
+            && crate::quality::face_pyramid_ratio(&h.map(|n| nodes[n as usize])) < below
+        {
+            validity[e] = judged;
+            newly.push(e);
+        }
+    }
+    newly
+}
+
+/// The worst validity (`judged`) of the elements with a movable node.
+fn worst_of(nodes: &[Point3<f64>], elements: &[Hex], movable: &[Freedom], judged: Validity) -> f64 {
     elements
         .iter()
         .filter(|h| h.iter().any(|&n| movable[n as usize] != Freedom::Fixed))
-        .map(|h| validity.unless_below(&h.map(|n| nodes[n as usize]), f64::NEG_INFINITY))
+        .map(|h| judged.unless_below(&h.map(|n| nodes[n as usize]), f64::NEG_INFINITY))
         .fold(f64::INFINITY, f64::min)
 }
 
