@@ -6,7 +6,8 @@
 //! whose interface nodes lie on the surface, within the bars as `report.json` says, warning where
 //! part of the surface is left out, or else a one-line refusal naming the surface. The cases that
 //! mesh within every bar today ([`WITHIN_BARS`], [`WITHIN_BARS_AT_COARSE`]) must go on doing so.
-//! Under CI a missing folder or case is a failure.
+//! A tree's OpenFOAM case of lumen and wall (`openfoam-fsi`) must pass OpenFOAM's checkMesh.
+//! Under CI a missing folder or case, or a missing checkMesh, is a failure.
 
 mod common;
 
@@ -51,6 +52,7 @@ fn cohort_at(preset: &str) {
     let cases = manifest(&vessels);
     assert!(cases.len() >= 18, "the manifest lists {} cases", cases.len());
     let root = temp_dir(&format!("cohort-{preset}"));
+    let foam = openfoam_available(&format!("cohort at {preset}"));
     println!(
         "{preset}: {:<32} {:>8} {:>7} {:>7} {:>7} {:>7} {:>6} {:>6}  result",
         "case", "hexes", "min SJ", "wall", "skew", "pyramid", "ends", "s"
@@ -65,7 +67,10 @@ fn cohort_at(preset: &str) {
         let unit = case.unit.to_string();
         let args = ["mesh", "--surface", path_str(&surface), "--units", &unit, "--preset", preset];
         let clock = Instant::now();
-        let o = vesselhex(&[&args[..], &["--formats", "vtu", "--output", path_str(&out), "--quiet"]].concat());
+        // A tree's OpenFOAM case, lumen and wall, goes to checkMesh (below).
+        let tree = case.ends > 2;
+        let formats = if tree { "vtu,openfoam-fsi" } else { "vtu" };
+        let o = vesselhex(&[&args[..], &["--formats", formats, "--output", path_str(&out), "--quiet"]].concat());
         let seconds = clock.elapsed().as_secs_f64();
         let stderr = String::from_utf8_lossy(&o.stderr);
         if o.status.code() == Some(1) {
@@ -117,6 +122,9 @@ fn cohort_at(preset: &str) {
             (cut_short == ENDS_CUT_SHORT.contains(&case.name.as_str()), format!("end_cut_short warned: {cut_short}")),
         ];
         failures.extend(checks.into_iter().filter(|c| !c.0).map(|c| format!("{}: {}", case.name, c.1)));
+        if tree && foam {
+            check_mesh(&out.join("openfoam-fsi"), &[]);
+        }
     }
     let _ = std::fs::remove_dir_all(&root);
     assert!(failures.is_empty(), "{preset}:\n{}", failures.join("\n"));

@@ -6,26 +6,14 @@
 
 mod common;
 
+use common::{check_mesh, copy_dir, foam, openfoam_available, FOAM_DIR};
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use vesselhex::config::{MeshConfig, OpenFoamConfig, Preset};
 use vesselhex::mesh::VesselMesh;
 use vesselhex::writers::openfoam::{self, read_polymesh, PolyMesh};
 use vesselhex::writers::WriteOptions;
-
-const FOAM_DIR: &str = "/usr/share/openfoam";
-
-/// True when OpenFOAM's binaries are on the PATH; panics when they are not and CI=true.
-fn openfoam_available(test: &str) -> bool {
-    let found = Command::new("sh").args(["-c", "command -v checkMesh"]).output().is_ok_and(|o| o.status.success());
-    if !found {
-        if std::env::var("CI").is_ok_and(|v| v == "true") {
-            panic!("{test}: OpenFOAM (checkMesh) is not installed but CI=true: apt-get install -y --no-install-recommends openfoam");
-        }
-        eprintln!("{test}: skipped (OpenFOAM's checkMesh not found)");
-    }
-    found
-}
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("vesselhex-openfoam-{}-{name}", std::process::id()));
@@ -40,71 +28,6 @@ fn cleanup(dir: &Path) {
     } else {
         eprintln!("kept {}", dir.display());
     }
-}
-
-/// Runs an OpenFOAM program; returns its output (stdout + stderr) and panics when it fails.
-fn foam(program: &str, args: &[&str], case: &Path) -> String {
-    let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
-    let out = Command::new(program)
-        .args(["-case", case.to_str().unwrap()])
-        .args(args)
-        .env("WM_PROJECT_DIR", wm)
-        .env("OMP_NUM_THREADS", "1")
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run {program}: {e}"));
-    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    assert!(out.status.success(), "{program} {args:?} on {} failed:\n{text}", case.display());
-    text
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let target = to.join(e.file_name());
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &target);
-        } else {
-            std::fs::copy(e.path(), target).unwrap();
-        }
-    }
-}
-
-/// checkMesh on a copy of the case (it writes sets into the case it checks). Pass = `Mesh OK.`
-/// and no line starting with `***` (its exit code is always 0). Returns the summary: mesh
-/// statistics and the patch table, which must not depend on the file format.
-fn check_mesh(case: &Path, extra: &[&str]) -> Vec<String> {
-    let copy = case.with_file_name(format!("{}-checkMesh", case.file_name().unwrap().to_str().unwrap()));
-    let _ = std::fs::remove_dir_all(&copy);
-    copy_dir(case, &copy);
-    let mut args = vec!["-noFunctionObjects"];
-    args.extend_from_slice(extra);
-    let log = foam("checkMesh", &args, &copy);
-    let _ = std::fs::remove_dir_all(&copy);
-    let failed: Vec<&str> = log.lines().filter(|l| l.trim_start().starts_with("***")).collect();
-    assert!(failed.is_empty(), "checkMesh on {}: {failed:?}\n{log}", case.display());
-    assert!(
-        log.lines().any(|l| l.trim() == "Mesh OK."),
-        "checkMesh on {} did not say Mesh OK.:\n{log}",
-        case.display()
-    );
-    let mut summary = Vec::new();
-    let mut section = "";
-    for line in log.lines() {
-        let t = line.trim();
-        if t.starts_with("Mesh stats") || t.starts_with("Checking patch topology") || t.starts_with("Checking geometry")
-        {
-            section = t;
-            continue;
-        }
-        if section.starts_with("Mesh stats") && t.contains(':') {
-            summary.push(t.split_whitespace().collect::<Vec<_>>().join(" "));
-        }
-        if section.starts_with("Checking patch topology") && !t.is_empty() && !t.starts_with("Patch") {
-            summary.push(t.split_whitespace().collect::<Vec<_>>().join(" "));
-        }
-    }
-    summary
 }
 
 /// Counts of the summary lines, e.g. "cells: 2240".
@@ -743,11 +666,9 @@ fn checkmesh_accepts_branched_vessels() {
 }
 
 /// Issue 7's real branched vessels with their given centerlines (the aorto-iliac, SimVascular and
-/// carotid bifurcations and the aortic arch), and gmsh_bifurcation from its bare surface, at the
-/// coarse and medium presets: checkMesh says `Mesh OK.` with no `***` line. gmsh_bifurcation at
-/// medium had a lumen cell at the crotch that its poor-element optimisation had flattened to a
-/// few micrometres, its corners all right-handed (scaled Jacobians >= 0.215) and its centre
-/// outside its wall face's plane: checkMesh's "Error in face pyramids".
+/// carotid bifurcations and the aortic arch), at the coarse and medium presets: checkMesh says
+/// `Mesh OK.` with no `***` line. Every tree meshed from its bare surface is checked by
+/// `tests/cohort_meshing.rs`.
 #[test]
 fn checkmesh_accepts_the_real_branched_vessels_at_both_presets() {
     if !openfoam_available("checkmesh_accepts_the_real_branched_vessels_at_both_presets") {
@@ -766,22 +687,6 @@ fn checkmesh_accepts_the_real_branched_vessels_at_both_presets() {
             eprintln!("{name}: checkMesh Mesh OK; {}", summary.join("; "));
             cleanup(&dir);
         }
-    }
-    for preset in ["coarse", "medium"] {
-        let name = format!("gmsh_bifurcation-bare-{preset}");
-        let dir = scratch(&name);
-        let surface = v.join("gmsh_bifurcation").join("bifurcation.stl");
-        let out = dir.join("mesh");
-        let args = ["--units", "cm", "--preset", preset, "--formats", "openfoam"];
-        let report = common::mesh_surface_cli(&surface, &out, &args);
-        let summary = check_mesh(&out.join("openfoam"), &[]);
-        let lumen = common::report_number(&report, "/lumen/elements") as usize;
-        assert_eq!(stat(&summary, "hexahedra"), lumen, "{name}: {summary:?}");
-        // vesselhex's own report agrees: every pyramid positive, within the bars.
-        assert!(common::report_number(&report, "/lumen/face_pyramid/min") > 0.0, "{name}");
-        assert_eq!(report["within_bars"], true, "{name}: {}", report["warnings"]);
-        eprintln!("{name}: checkMesh Mesh OK; {}", summary.join("; "));
-        cleanup(&dir);
     }
 }
 

@@ -462,3 +462,85 @@ pub fn manifest(vessels: &Path) -> Vec<Case> {
         })
         .collect()
 }
+
+// ---------------------------------------------------------------------------------------------
+// OpenFOAM
+
+pub const FOAM_DIR: &str = "/usr/share/openfoam";
+
+/// True when OpenFOAM's binaries are on the PATH; panics when they are not and CI=true.
+pub fn openfoam_available(test: &str) -> bool {
+    let found = Command::new("sh").args(["-c", "command -v checkMesh"]).output().is_ok_and(|o| o.status.success());
+    if !found {
+        if under_ci() {
+            panic!("{test}: OpenFOAM (checkMesh) is not installed but CI=true: apt-get install -y --no-install-recommends openfoam");
+        }
+        eprintln!("{test}: skipped (OpenFOAM's checkMesh not found)");
+    }
+    found
+}
+
+/// Runs an OpenFOAM program; returns its output (stdout + stderr) and panics when it fails.
+pub fn foam(program: &str, args: &[&str], case: &Path) -> String {
+    let wm = std::env::var("WM_PROJECT_DIR").unwrap_or_else(|_| FOAM_DIR.into());
+    let out = Command::new(program)
+        .args(["-case", case.to_str().unwrap()])
+        .args(args)
+        .env("WM_PROJECT_DIR", wm)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {program}: {e}"));
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{program} {args:?} on {} failed:\n{text}", case.display());
+    text
+}
+
+pub fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let target = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).unwrap();
+        }
+    }
+}
+
+/// checkMesh on a copy of the case (it writes sets into the case it checks). Pass = `Mesh OK.`
+/// and no line starting with `***` (its exit code is always 0). Returns the summary: mesh
+/// statistics and the patch table, which must not depend on the file format.
+pub fn check_mesh(case: &Path, extra: &[&str]) -> Vec<String> {
+    let copy = case.with_file_name(format!("{}-checkMesh", case.file_name().unwrap().to_str().unwrap()));
+    let _ = std::fs::remove_dir_all(&copy);
+    copy_dir(case, &copy);
+    let mut args = vec!["-noFunctionObjects"];
+    args.extend_from_slice(extra);
+    let log = foam("checkMesh", &args, &copy);
+    let _ = std::fs::remove_dir_all(&copy);
+    let failed: Vec<&str> = log.lines().filter(|l| l.trim_start().starts_with("***")).collect();
+    assert!(failed.is_empty(), "checkMesh on {}: {failed:?}\n{log}", case.display());
+    assert!(
+        log.lines().any(|l| l.trim() == "Mesh OK."),
+        "checkMesh on {} did not say Mesh OK.:\n{log}",
+        case.display()
+    );
+    let mut summary = Vec::new();
+    let mut section = "";
+    for line in log.lines() {
+        let t = line.trim();
+        if t.starts_with("Mesh stats") || t.starts_with("Checking patch topology") || t.starts_with("Checking geometry")
+        {
+            section = t;
+            continue;
+        }
+        if section.starts_with("Mesh stats") && t.contains(':') {
+            summary.push(t.split_whitespace().collect::<Vec<_>>().join(" "));
+        }
+        if section.starts_with("Checking patch topology") && !t.is_empty() && !t.starts_with("Patch") {
+            summary.push(t.split_whitespace().collect::<Vec<_>>().join(" "));
+        }
+    }
+    summary
+}
