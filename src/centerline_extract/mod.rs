@@ -25,8 +25,10 @@
 //! The path through ball centres zig-zags at the scale of the merge distance, so it is
 //! resampled at a tenth of the radius and smoothed with a Gaussian in arc length of width
 //! 0.25 r (corner cutting in a bend of radius `Rb` is about `(0.25 r)^2 / 2Rb`, well below
-//! 1 % of r on every vessel we have). The radius stored is the true distance from each point to
-//! the (opened) surface's triangles, computed with the BVH of [`LumenSurface`].
+//! 1 % of r on every vessel we have). Where the depth is nearly flat across a section, the path
+//! is then moved within its normal plane to the section's deepest point (`centring`). The radius
+//! stored is the true distance from each point to the (opened) surface's triangles, computed with
+//! the BVH of [`LumenSurface`].
 //!
 //! A harmonic field on the surface (level-set rings) was the alternative; its ring centroids
 //! are not the centres of inscribed spheres (biased in bends and at junctions), its radius is
@@ -49,6 +51,7 @@
 //! (the ball stops growing there), whose ball becomes the end. The inlet is the largest end, or
 //! the end nearest a point.
 
+mod centring;
 mod ends;
 mod medial;
 mod rounded;
@@ -462,7 +465,8 @@ fn given_end_ball(p: &Point3<f64>, lumen: &LumenSurface, inward: &[Vector3<f64>]
 
 /// Resamples a chain of balls at [`STEP_FRACTION`] of its small radii, smooths it with a
 /// Gaussian of width [`SMOOTH_SIGMA`] x radius in arc length (window kept symmetric, so the end
-/// points stay put), and measures the radius as the distance to the surface.
+/// points stay put), centres it on the ridge of the lumen's depth (see `centring`), and
+/// measures the radius as the distance to the surface.
 fn smooth_path(balls: &[Ball], lumen: &LumenSurface) -> (Vec<Point3<f64>>, Vec<f64>) {
     let mut s = vec![0.0];
     for w in balls.windows(2) {
@@ -492,25 +496,39 @@ fn smooth_path(balls: &[Ball], lumen: &LumenSurface) -> (Vec<Point3<f64>>, Vec<f
             (t, p, r)
         })
         .collect();
-    let smoothed: Vec<Point3<f64>> = (0..samples.len())
-        .into_par_iter()
-        .map(|i| {
-            let (t, p, r) = samples[i];
-            let sigma = SMOOTH_SIGMA * r;
-            let half = (3.0 * sigma).min(t).min(length - t);
-            if half <= 0.0 || sigma <= 0.0 {
-                return p;
-            }
-            let (mut sum, mut weight) = (nalgebra::Vector3::zeros(), 0.0);
-            let from = samples.partition_point(|q| q.0 < t - half);
-            for &(tj, pj, _) in samples[from..].iter().take_while(|q| q.0 <= t + half) {
-                let w = (-(tj - t).powi(2) / (2.0 * sigma * sigma)).exp();
-                sum += pj.coords * w;
-                weight += w;
-            }
-            Point3::from(sum / weight)
-        })
-        .collect();
+    let s: Vec<f64> = samples.iter().map(|q| q.0).collect();
+    let radii: Vec<f64> = samples.iter().map(|q| q.2).collect();
+    let along: Vec<Vector3<f64>> = samples.iter().map(|q| q.1.coords).collect();
+    let smoothed: Vec<Point3<f64>> = gaussian(&s, &along, &radii).into_iter().map(Point3::from).collect();
+    // The shifts onto the depth's ridge are smoothed as the path was: the deepest point of each
+    // section moves with the triangles' facets.
+    let shifts = gaussian(&s, &centring::ridge_shifts(&smoothed, &s, lumen), &radii);
+    let smoothed: Vec<Point3<f64>> = smoothed.iter().zip(&shifts).map(|(p, d)| p + d).collect();
     let radii = smoothed.par_iter().map(|p| lumen.closest(p).distance).collect();
     (smoothed, radii)
+}
+
+/// `values` at arc lengths `s` smoothed by a Gaussian in arc length of width [`SMOOTH_SIGMA`]
+/// times `radii`, its window kept symmetric and so shrinking to nothing at either end (the end
+/// values stay put).
+fn gaussian(s: &[f64], values: &[Vector3<f64>], radii: &[f64]) -> Vec<Vector3<f64>> {
+    let length = s[s.len() - 1];
+    (0..s.len())
+        .into_par_iter()
+        .map(|i| {
+            let (t, sigma) = (s[i], SMOOTH_SIGMA * radii[i]);
+            let half = (3.0 * sigma).min(t).min(length - t);
+            if half <= 0.0 || sigma <= 0.0 {
+                return values[i];
+            }
+            let (mut sum, mut weight) = (Vector3::zeros(), 0.0);
+            let from = s.partition_point(|&x| x < t - half);
+            for (tj, vj) in s[from..].iter().zip(&values[from..]).take_while(|q| *q.0 <= t + half) {
+                let w = (-(tj - t).powi(2) / (2.0 * sigma * sigma)).exp();
+                sum += vj * w;
+                weight += w;
+            }
+            sum / weight
+        })
+        .collect()
 }
