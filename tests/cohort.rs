@@ -1,17 +1,18 @@
 //! The real-vessel cohort from the bare surface (issue 19): every case of
 //! `../shared/vessels/manifest.json` (read through `VESSELHEX_VESSELS`), centerlines computed
 //! with no hint. Prints a table (case, ends found / true ends, distance to the case's own
-//! centerline over the radius where it ships one, seconds) and asserts the floor: every true end
-//! found, at most two extra, one path per outlet, every path point inside the lumen (away from
-//! the end points). Under CI a
-//! missing folder or case is a failure.
+//! centerline over the radius where it ships one, the reference's depth where the two differ
+//! most, seconds) and asserts the floor: every true end found, at most two extra, one path per
+//! outlet, every path point inside the lumen (away from the end points), agreement with VMTK's
+//! centerlines of the same surface, and no reference more central than ours where they differ
+//! most. Under CI a missing folder or case is a failure.
 
 mod common;
 
 use common::*;
 use nalgebra::Point3;
 use std::time::Instant;
-use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions};
+use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions, Extraction};
 use vesselhex::input::{clean_surface, read_centerlines, read_surface, topology, CenterlinePolyline, TriangleSurface};
 use vesselhex::surface::LumenSurface;
 
@@ -26,18 +27,28 @@ const REFERENCES: [(&str, &str); 6] = [
 ];
 
 /// Where the reference was computed by VMTK on this very surface, ours must agree with it to the
-/// issue's bar: median distance 2 % and 95th percentile 10 % of the radius. (The others were
-/// computed on a smoothed surface or another reconstruction; their figures are printed.)
-const SAME_SURFACE_REFERENCES: [&str; 2] = ["vmtk_aortoiliac", "simvascular_demo_aortoiliac"];
+/// issue's bar: median distance 2 % and 95th percentile 10 % of the radius. The ICA's reference
+/// is VMTK's too, its radius this surface's distance to 0.3 % (median). (The others were
+/// computed on a smoothed surface or another reconstruction, or by another tool; their figures
+/// are printed.)
+const SAME_SURFACE_REFERENCES: [&str; 3] =
+    ["vmtk_aortoiliac", "simvascular_demo_aortoiliac", "aneurisk_C0092_ica_segment"];
 
-/// Distance from `p` to the polylines (mm).
-fn to_polylines(p: &Point3<f64>, lines: &[CenterlinePolyline]) -> f64 {
+/// Where ours and the reference differ most (their distance at or above its 95th percentile),
+/// the reference's point is not the more central one: the median of its distance to the wall
+/// over ours is at most this. (Before the paths were centred on the depth's ridge, the ICA's
+/// was 1.010 and the VMTK aorta's 1.017: ours ran beside the deepest points.)
+const MOST_DIFFERENT_DEPTH_RATIO: f64 = 1.01;
+
+/// The point of the polylines' segments closest to `p`.
+fn closest_on_polylines(p: &Point3<f64>, lines: &[CenterlinePolyline]) -> Point3<f64> {
     let segment = |a: &Point3<f64>, b: &Point3<f64>| {
         let ab = b - a;
         let t = if ab.norm_squared() > 0.0 { ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0) } else { 0.0 };
-        (a + ab * t - p).norm()
+        a + ab * t
     };
-    lines.iter().flat_map(|l| l.points.windows(2).map(|w| segment(&w[0], &w[1]))).fold(f64::INFINITY, f64::min)
+    let points = lines.iter().flat_map(|l| l.points.windows(2).map(|w| segment(&w[0], &w[1])));
+    points.min_by(|a, b| (a - p).norm().total_cmp(&(b - p).norm())).unwrap()
 }
 
 fn percentile(values: &mut [f64], q: f64) -> f64 {
@@ -56,12 +67,38 @@ fn closed(surface: &TriangleSurface) -> LumenSurface {
     LumenSurface::from_parts(vertices, triangles, surface.source.clone()).unwrap()
 }
 
+/// Our points against the reference, away from the ends (within a radius of an end the two stop
+/// at different places by construction): the median and 95th percentile of the distance over
+/// our radius, and where that distance is at or above its 95th percentile, the median of the
+/// reference point's depth in `lumen` over our radius.
+fn against_reference(ex: &Extraction, reference: &[CenterlinePolyline], lumen: &LumenSurface) -> (f64, f64, f64) {
+    let near_end = |p: &Point3<f64>, r: f64| ex.ends.iter().any(|e| (p - e.centre).norm() < e.radius.max(r));
+    let pairs: Vec<(f64, f64)> = ex
+        .centerlines
+        .polylines
+        .iter()
+        .flat_map(|l| l.points.iter().zip(l.radii.as_ref().unwrap()))
+        .filter(|(p, r)| !near_end(p, **r))
+        .map(|(p, r)| {
+            let q = closest_on_polylines(p, reference);
+            ((q - p).norm() / r, lumen.closest(&q).distance / r)
+        })
+        .collect();
+    let mut d: Vec<f64> = pairs.iter().map(|x| x.0).collect();
+    let (median, p95) = (percentile(&mut d, 0.5), percentile(&mut d, 0.95));
+    let mut depth: Vec<f64> = pairs.iter().filter(|x| x.0 >= p95).map(|x| x.1).collect();
+    (median, p95, percentile(&mut depth, 0.5))
+}
+
 #[test]
 fn every_real_surface_gives_every_end_and_paths_inside_the_lumen() {
     let Some(vessels) = vessels_dir() else { return };
     let cases = manifest(&vessels);
     assert!(cases.len() >= 18, "the manifest lists {} cases", cases.len());
-    println!("{:<34} {:>11} {:>8} {:>8} {:>8} {:>7}", "case", "ends/true", "inside", "d/r med", "d/r p95", "s");
+    println!(
+        "{:<34} {:>11} {:>8} {:>8} {:>8} {:>8} {:>7}",
+        "case", "ends/true", "inside", "d/r med", "d/r p95", "depth95", "s"
+    );
     let mut failures = vec![];
     for case in &cases {
         let dir = vessels.join(&case.name);
@@ -93,28 +130,22 @@ fn every_real_surface_gives_every_end_and_paths_inside_the_lumen() {
                 }
             }
         }
-        let (mut median, mut p95) = (f64::NAN, f64::NAN);
+        let (mut median, mut p95, mut depth_ratio) = (f64::NAN, f64::NAN, f64::NAN);
         if let Some((_, file)) = REFERENCES.iter().find(|(n, _)| *n == case.name) {
             let reference = read_centerlines(&dir.join(file), case.unit).unwrap();
-            // Our points against the reference, away from the ends (within a radius of an end
-            // the two stop at different places by construction).
-            let mut d: Vec<f64> = lines
-                .iter()
-                .flat_map(|l| l.points.iter().zip(l.radii.as_ref().unwrap()))
-                .filter(|(p, r)| !ex.ends.iter().any(|e| (*p - e.centre).norm() < e.radius.max(**r)))
-                .map(|(p, r)| to_polylines(p, &reference.polylines) / r)
-                .collect();
-            (median, p95) = (percentile(&mut d, 0.5), percentile(&mut d, 0.95));
+            (median, p95, depth_ratio) =
+                against_reference(&ex, &reference.polylines, &LumenSurface::new(&surface).unwrap());
         }
         let figure = |x: f64| if x.is_nan() { "-".to_string() } else { format!("{x:.3}") };
         println!(
-            "{:<34} {:>5} / {:<3} {:>8} {:>8} {:>8} {seconds:>7.2}",
+            "{:<34} {:>5} / {:<3} {:>8} {:>8} {:>8} {:>8} {seconds:>7.2}",
             case.name,
             ex.ends.len(),
             case.ends,
             format!("{in_lumen}/{interior}"),
             figure(median),
-            figure(p95)
+            figure(p95),
+            figure(depth_ratio)
         );
         if ex.ends.len() < case.ends || ex.ends.len() > case.ends + 2 {
             failures.push(format!("{}: {} ends found, {} true", case.name, ex.ends.len(), case.ends));
@@ -131,6 +162,13 @@ fn every_real_surface_gives_every_end_and_paths_inside_the_lumen() {
         }
         if SAME_SURFACE_REFERENCES.contains(&case.name.as_str()) && !(median <= 0.02 && p95 <= 0.10) {
             failures.push(format!("{}: d/r median {median:.3} p95 {p95:.3} against its VMTK centerline", case.name));
+        }
+        if depth_ratio > MOST_DIFFERENT_DEPTH_RATIO {
+            failures.push(format!(
+                "{}: where ours and the reference differ most, the reference lies deeper ({depth_ratio:.3} of our \
+                 radius)",
+                case.name
+            ));
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
