@@ -860,7 +860,7 @@ fn unit_warning(
 
 /// Refuses absolute lengths out of proportion with the vessel (the relative settings' bounds,
 /// applied to the median radius): a wall thicker than twice the radius or thinner than a
-/// thousandth of it, an axial spacing below a hundredth of the radius or above ten radii.
+/// thousandth of it, an axial spacing below a thousandth of the radius or above ten radii.
 fn check_lengths_against_radius(config: &MeshConfig, radius: f64) -> Result<()> {
     if !(radius > 0.0 && radius.is_finite()) {
         return Ok(());
@@ -875,7 +875,8 @@ fn check_lengths_against_radius(config: &MeshConfig, radius: f64) -> Result<()> 
         _ => Ok(()),
     };
     check("wall.thickness_mm", config.wall.thickness_mm, (0.001, 2.0), "wall.thickness_ratio")?;
-    check("lumen.axial_spacing_mm", config.lumen.axial_spacing_mm, (0.01, 10.0), "lumen.axial_spacing")
+    let spacing = (crate::config::MIN_AXIAL_SPACING, 10.0);
+    check("lumen.axial_spacing_mm", config.lumen.axial_spacing_mm, spacing, "lumen.axial_spacing")
 }
 
 fn end_kind(end: &crate::projection::BranchEnd) -> &'static str {
