@@ -802,8 +802,8 @@ const POOR_ROUNDS: usize = 3;
 /// [`watch_pyramids`]). A parallelepiped's are 1, and the cells of a healthy lumen are near it;
 /// counting the pyramids of every element doubled the CPU time of the branched trees at medium.
 const PYRAMID_WATCH: f64 = 0.5;
-/// Passes of a round's optimisation after its first while elements newly fall below
-/// [`PYRAMID_WATCH`].
+/// Passes of a round's optimisation after its first, each around the elements the pass before
+/// took below [`PYRAMID_TARGET`] while their pyramids were out of sight.
 const WATCH_PASSES: usize = 2;
 
 /// Frees the nodes within [`POOR_REACH`] elements of every element whose validity (`judged`) is
@@ -1107,6 +1107,28 @@ fn surface_normals(
 mod tests {
     use super::*;
     use crate::blocks::graded_levels;
+
+    /// Only elements with a free node and a pyramid ratio below the threshold are put in sight,
+    /// each once, and only when pyramids are judged.
+    #[test]
+    fn pyramids_are_watched_where_they_are_low_and_a_node_is_free() {
+        let thin = crate::quality::tests::warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]);
+        let square = crate::quality::tests::warped_slab(0.0, [1.0; 4]);
+        let nodes: Vec<Point3<f64>> = thin.iter().chain(&square).copied().collect();
+        let elements: Vec<Hex> = vec![[0, 1, 2, 3, 4, 5, 6, 7], [8, 9, 10, 11, 12, 13, 14, 15]];
+        let mut free = vec![Freedom::Free; 16];
+        let mut validity = vec![Validity::Corners; 2];
+        let watch = |free: &[Freedom], judged, validity: &mut [Validity]| {
+            watch_pyramids(&nodes, &elements, free, judged, PYRAMID_WATCH, validity)
+        };
+        assert!(watch(&free, Validity::Corners, &mut validity).is_empty());
+        assert_eq!(watch(&free, Validity::CornersAndPyramids, &mut validity), vec![0], "the thin cell alone");
+        assert_eq!(validity, [Validity::CornersAndPyramids, Validity::Corners]);
+        assert!(watch(&free, Validity::CornersAndPyramids, &mut validity).is_empty(), "watched once");
+        free[..8].fill(Freedom::Fixed);
+        let mut fresh = vec![Validity::Corners; 2];
+        assert!(watch(&free, Validity::CornersAndPyramids, &mut fresh).is_empty(), "no free node");
+    }
     use crate::centerline::CenterlineTree;
     use crate::config::MeshConfig;
     use crate::projection::{project_branch, ProjectionSetup};
