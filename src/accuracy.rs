@@ -89,11 +89,21 @@ pub fn surface_accuracy(
 ) -> Result<SurfaceAccuracy> {
     let node_d = node_distances(mesh, surface);
 
-    // The meshed lumen surface as triangles.
+    // The meshed lumen surface as triangles, over its own nodes only (a copy of every node of
+    // the mesh was 190 MB at 10 M hexes).
+    let mut local = std::collections::HashMap::new();
+    let mut vertices = Vec::new();
+    let mut index = |n: u32| -> u32 {
+        *local.entry(n).or_insert_with(|| {
+            vertices.push(mesh.nodes[n as usize]);
+            (vertices.len() - 1) as u32
+        })
+    };
     let mut tris = Vec::new();
     for f in &mesh.face_sets[sets::LUMEN_WALL_FACES] {
         let q = face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
         let p = q.map(|n| mesh.nodes[n as usize]);
+        let q = q.map(&mut index);
         if (p[2] - p[0]).norm() <= (p[3] - p[1]).norm() {
             tris.push([q[0], q[1], q[2]]);
             tris.push([q[0], q[2], q[3]]);
@@ -102,17 +112,18 @@ pub fn surface_accuracy(
             tris.push([q[1], q[2], q[3]]);
         }
     }
-    let meshed = LumenSurface::from_parts(mesh.nodes.clone(), tris, "meshed lumen surface".into())?;
+    let meshed = LumenSurface::from_parts(vertices, tris, "meshed lumen surface".into())?;
 
     // Input vertices inside the meshed part: their nearest centerline sample (over every
     // branch) lies within the meshed stretch of its branch, and they lie on the inner side of
     // the end planes of that branch's vessel ends. Junction ends are meshed up to the centre.
     let mut samples: Vec<[f64; 3]> = Vec::new();
-    let mut owner: Vec<(usize, f64)> = Vec::new();
+    // Each sample's branch, arc length and radius.
+    let mut owner: Vec<(usize, f64, f64)> = Vec::new();
     for (b, branch) in branches.iter().enumerate() {
         for s in &branch.samples {
             samples.push([s.point.x, s.point.y, s.point.z]);
-            owner.push((b, s.s));
+            owner.push((b, s.s, s.radius));
         }
     }
     let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&samples)
@@ -121,7 +132,7 @@ pub fn surface_accuracy(
         .filter(|&i| {
             let v = surface.vertices[i];
             let nn = tree.query(&[v.x, v.y, v.z]).nearest_one::<SquaredEuclidean<f64>>().execute();
-            let (b, s) = owner[nn.item as usize];
+            let (b, s, _) = owner[nn.item as usize];
             let p = projected.iter().find(|p| p.branch == b).expect("every branch is projected");
             let first = &p.sections[0].station;
             let last = &p.sections[p.sections.len() - 1].station;
@@ -140,8 +151,7 @@ pub fn surface_accuracy(
     // The farthest vertex relative to the vessel's radius there (the first of equals).
     let radius_at = |v: &nalgebra::Point3<f64>| {
         let nn = tree.query(&[v.x, v.y, v.z]).nearest_one::<SquaredEuclidean<f64>>().execute();
-        let (b, s) = owner[nn.item as usize];
-        branches[b].samples.iter().find(|x| x.s == s).map_or(f64::INFINITY, |x| x.radius)
+        owner[nn.item as usize].2
     };
     let mut farthest_vertex: Option<(nalgebra::Point3<f64>, f64, f64)> = None;
     for (&i, &d) in inside.iter().zip(&vert_d) {

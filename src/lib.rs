@@ -36,6 +36,7 @@ pub mod synthetic_branching;
 pub mod testing;
 pub mod units;
 pub mod volume;
+pub mod wall_directions;
 pub mod wall_surfaces;
 pub mod writers;
 

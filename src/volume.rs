@@ -18,6 +18,7 @@ use crate::projection::{BranchEnd, ProjectedBranch};
 use crate::quality::Validity;
 use crate::surface::LumenSurface;
 use crate::surface_smoothing::{smooth_on_surface, RayNode, SmoothedNode};
+use crate::wall_directions::{surface_normals, SurfaceGraph, JUNCTION_SMOOTHING_PASSES};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -277,7 +278,16 @@ pub fn build_volume(
                     _ => JUNCTION_SMOOTHING_PASSES,
                 };
                 let mut dirs =
-                    surface_normals(nodes, &quads, &graph, &node_ray, &end_tangent, &junction_node, junction_passes);
+                    surface_normals(
+                    nodes,
+                    &quads,
+                    &graph,
+                    &node_ray,
+                    &end_tangent,
+                    &junction_node,
+                    junction_passes,
+                    &nominal,
+                );
                 // Along the rays in junction transitions, where asked: the caller keeps whichever
                 // wall is better (see `build_volume`'s caller).
                 if junction_wall == JunctionWall::Ray {
@@ -351,7 +361,7 @@ pub fn build_volume(
         face_sets.insert(sets::wall_end(name), vec![]);
     }
     let mut add_face =
-        |set: String, e: usize, face: usize| face_sets.get_mut(&set).expect("declared above").push(ef(e, face));
+        |set: &str, e: usize, face: usize| face_sets.get_mut(set).expect("declared above").push(ef(e, face));
 
     // Elements: lumen (core + lateral) of every branch, then each wall region.
     let mut hexes: Vec<Hex> = Vec::new();
@@ -384,7 +394,7 @@ pub fn build_volume(
             for level in 0..r_cells {
                 for k in 0..ring_len(b) {
                     if level == r_cells - 1 {
-                        add_face(sets::LUMEN_WALL_FACES.into(), hexes.len(), FACE_OUTER);
+                        add_face(sets::LUMEN_WALL_FACES, hexes.len(), FACE_OUTER);
                     }
                     hexes.push(ring_hex(b, i, level, k));
                 }
@@ -392,7 +402,7 @@ pub fn build_volume(
             for (cond, inlet, face) in [(i == 0, true, FACE_UPSTREAM), (i == last, false, FACE_DOWNSTREAM)] {
                 if let (true, Some(name)) = (cond, end_name(b, inlet)) {
                     for e in first_of_interval..hexes.len() {
-                        add_face(sets::lumen_end(name), e, face);
+                        add_face(&sets::lumen_end(name), e, face);
                     }
                 }
             }
@@ -430,15 +440,15 @@ pub fn build_volume(
                     for k in 0..ring_len(b) {
                         let e = hexes.len();
                         if w == 0 {
-                            add_face(sets::WALL_LUMEN_FACES.into(), e, FACE_INNER);
+                            add_face(sets::WALL_LUMEN_FACES, e, FACE_INNER);
                         }
                         if w == w_cells - 1 {
-                            add_face(sets::WALL_OUTER_FACES.into(), e, FACE_OUTER);
+                            add_face(sets::WALL_OUTER_FACES, e, FACE_OUTER);
                         }
                         for (cond, inlet, face) in [(i == 0, true, FACE_UPSTREAM), (i == last, false, FACE_DOWNSTREAM)]
                         {
                             if let (true, Some(name)) = (cond, end_name(b, inlet)) {
-                                add_face(sets::wall_end(name), e, face);
+                                add_face(&sets::wall_end(name), e, face);
                             }
                         }
                         hexes.push(ring_hex(b, i, r_cells + w, k));
@@ -997,110 +1007,6 @@ fn crotch_limited_thickness(
         }
     }
     nominal.iter().zip(factor).map(|(t, f)| t * f).collect()
-}
-
-/// The lumen surface's quad mesh as a graph: its nodes (sorted ids) and, by position in that
-/// list, each node's edge neighbours (sorted, each once).
-struct SurfaceGraph {
-    nodes: Vec<u32>,
-    /// Position in `nodes` of every mesh node, `usize::MAX` off the surface.
-    position: Vec<usize>,
-    neighbours: Vec<Vec<usize>>,
-}
-
-impl SurfaceGraph {
-    fn new(quads: &[[u32; 4]], node_count: usize) -> Self {
-        let mut nodes: Vec<u32> = quads.iter().flatten().copied().collect();
-        nodes.sort_unstable();
-        nodes.dedup();
-        let mut position = vec![usize::MAX; node_count];
-        for (i, &s) in nodes.iter().enumerate() {
-            position[s as usize] = i;
-        }
-        let mut neighbours: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
-        for q in quads {
-            for c in 0..4 {
-                let nb = &mut neighbours[position[q[c] as usize]];
-                nb.push(position[q[(c + 1) % 4] as usize]);
-                nb.push(position[q[(c + 3) % 4] as usize]);
-            }
-        }
-        for nb in &mut neighbours {
-            nb.sort_unstable();
-            nb.dedup();
-        }
-        SurfaceGraph { nodes, position, neighbours }
-    }
-}
-
-/// Passes of neighbour averaging of the wall directions: enough to calm the voxel ripples of
-/// segmented surfaces, few enough to keep the shape.
-const NORMAL_SMOOTHING_PASSES: usize = 3;
-/// Further passes over the nodes of junction transitions ([`JunctionWall::SmoothedNormal`]).
-const JUNCTION_SMOOTHING_PASSES: usize = 30;
-
-/// Outward unit normals of the meshed lumen surface at its nodes, by position in the graph: the
-/// sum of the adjacent quads' normals, smoothed over the quad mesh (a node counts twice, each
-/// neighbour once; a node with fewer than four neighbours, on an end ring, counts itself in
-/// their place). At the vessel's end rings the axial component is removed so the wall's end
-/// rings stay in the end planes.
-fn surface_normals(
-    nodes: &[Point3<f64>],
-    quads: &[[u32; 4]],
-    graph: &SurfaceGraph,
-    rays: &[Vector3<f64>],
-    end_tangent: &HashMap<u32, Vector3<f64>>,
-    junction_node: &[bool],
-    junction_passes: usize,
-) -> Vec<Vector3<f64>> {
-    let mut normal = vec![Vector3::zeros(); graph.nodes.len()];
-    for q in quads {
-        let p = q.map(|i| nodes[i as usize]);
-        // circumferential x axial = outward
-        let a = (p[1] - p[0]) + (p[2] - p[3]);
-        let b = (p[3] - p[0]) + (p[2] - p[1]);
-        let v = a.cross(&b);
-        for c in 0..4 {
-            normal[graph.position[q[c] as usize]] += v;
-        }
-    }
-    let unit = |v: Vector3<f64>, fallback: Vector3<f64>| if v.norm() > 0.0 { v.normalize() } else { fallback };
-    for (v, &s) in normal.iter_mut().zip(&graph.nodes) {
-        *v = unit(*v, rays[s as usize]);
-    }
-    // One pass of neighbour averaging over the nodes listed.
-    let smooth = |normal: &mut Vec<Vector3<f64>>, selected: &[usize]| {
-        let averaged: Vec<Vector3<f64>> = selected
-            .iter()
-            .map(|&i| {
-                let nb = &graph.neighbours[i];
-                let mut sum = normal[i] * (2.0 + 4usize.saturating_sub(nb.len()) as f64);
-                for &j in nb {
-                    sum += normal[j];
-                }
-                unit(sum, normal[i])
-            })
-            .collect();
-        for (&i, v) in selected.iter().zip(averaged) {
-            normal[i] = v;
-        }
-    };
-    let all: Vec<usize> = (0..graph.nodes.len()).collect();
-    for _ in 0..NORMAL_SMOOTHING_PASSES {
-        smooth(&mut normal, &all);
-    }
-    // Across a flow divider the normal turns fast; grown along it unsmoothed, the outer wall
-    // layers shear. Junction nodes get more passes where asked.
-    let in_junction: Vec<usize> = all.iter().copied().filter(|&i| junction_node[graph.nodes[i] as usize]).collect();
-    for _ in 0..junction_passes {
-        smooth(&mut normal, &in_junction);
-    }
-    for (id, t) in end_tangent {
-        let i = graph.position[*id as usize];
-        let v = normal[i];
-        normal[i] = unit(v - t * v.dot(t), rays[*id as usize]);
-    }
-    normal
 }
 
 #[cfg(test)]
