@@ -54,11 +54,18 @@ pub(crate) const NORMAL_SMOOTHING_PASSES: usize = 3;
 /// Further passes over the nodes of junction transitions (`JunctionWall::SmoothedNormal`).
 pub(crate) const JUNCTION_SMOOTHING_PASSES: usize = 30;
 /// Length over which the directions are smoothed at the least (the spread of the smoothing along
-/// each surface direction), as a share of the wall thickness. On C0092 at 3 M hexes, the
-/// adventitia's scaled Jacobian (min / mean) is 0.365 / 0.9906, 0.557 / 0.9934 and 0.653 / 0.9942
-/// at 0.5, 0.8 and 1.2, against 0.493 / 0.9916 at 0.8 M hexes before; past 0.8 the intima's mean
-/// falls (0.9965 -> 0.9958: the directions leave the normal where the section is not round) and
-/// the solve takes longer.
+/// each surface direction), as a share of the wall thickness. C0092 at 3 M and 10 M hexes, the
+/// adventitia's minimum / mean scaled Jacobian and the intima's mean:
+///
+/// | reach | 3 M | 10 M | intima mean |
+/// |---|---|---|---|
+/// | 0.35 | 0.465 / 0.9927 | 0.400 / 0.9925 | 0.9971 |
+/// | 0.5 | 0.564 / 0.9937 | 0.404 / 0.9936 | 0.9970 |
+/// | 0.7 | 0.609 / 0.9944 | 0.442 / 0.9943 | 0.9966 |
+/// | 1.0 | 0.729 / 0.9947 | 0.545 / 0.9946 | 0.9958 |
+///
+/// Three passes at 0.8 M gave 0.493 / 0.9916. Past a half the outer layer gains what the inner
+/// loses: the directions leave the normal where the section is not round.
 const SMOOTHING_REACH: f64 = 0.5;
 
 /// The wall's growth direction at every surface node (by position in `graph`): the outward
@@ -224,8 +231,10 @@ impl Laplacian {
 /// node, `reach^2 = 2 t D`): a Gaussian of that spread on an even grid, the averaging passes'
 /// limit. The passes would need `(reach / spacing)^2` sweeps (C0092 at 10 M hexes: 970, 3.1 s);
 /// the heat operator `exp(-t D L)` is applied as its Chebyshev series over the spectrum of
-/// `D L` (bounded by Gershgorin's circles), whose terms fall off past about `6 sqrt(a)`,
-/// `a = t lambda_max / 2`: a number of sweeps that grows as reach / spacing. The nodes in
+/// `D L` (bounded by Gershgorin's circles), whose terms fall off past about `7 sqrt(a)`,
+/// `a = t lambda_max / 2`: a number of sweeps that grows as reach / spacing (at 10 M, 252 sweeps
+/// in 0.67 s; conjugate gradients on the implicit step took 551 iterations and 2.7 s, and its
+/// cusped kernel needed a longer reach for the same wall). The nodes in
 /// `fixed` (the vessel ends' directions, in their planes) keep theirs, so the directions next to
 /// an end turn into its plane over the reach. The result is not normalised.
 fn heat_smoothing(
