@@ -277,8 +277,7 @@ pub fn build_volume(
                     JunctionWall::Normal => 0,
                     _ => JUNCTION_SMOOTHING_PASSES,
                 };
-                let mut dirs =
-                    surface_normals(
+                let mut dirs = surface_normals(
                     nodes,
                     &quads,
                     &graph,

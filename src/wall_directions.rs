@@ -169,11 +169,11 @@ fn passes_fall_short(nodes: &[Point3<f64>], graph: &SurfaceGraph, reach: &[f64])
         .zip(reach)
         .filter_map(|((&s, nb), reach)| {
             let p = nodes[s as usize];
-            let shortest =
+            let shortest_squared =
                 nb.iter().map(|&j| (nodes[graph.nodes[j] as usize] - p).norm_squared()).fold(f64::INFINITY, f64::min);
             let weights = 2.0 + 4usize.saturating_sub(nb.len()) as f64 + nb.len() as f64;
-            let spread = NORMAL_SMOOTHING_PASSES as f64 * 2.0 * shortest / weights;
-            (shortest.is_finite() && shortest > 0.0).then(|| reach * reach / spread)
+            let variance = NORMAL_SMOOTHING_PASSES as f64 * 2.0 * shortest_squared / weights;
+            (shortest_squared.is_finite() && shortest_squared > 0.0).then(|| reach * reach / variance)
         })
         .collect();
     if shortfall.is_empty() {
@@ -308,7 +308,13 @@ mod tests {
     /// its quads circumferential x axial outward, its radius a zigzag of amplitude `ripple` and
     /// period 0.4 along the axis (the facets of a segmented surface, whose edges turn the normal
     /// at a point whatever the mesh's step).
-    fn rippled_tube(r: f64, around: usize, stations: usize, step: f64, ripple: f64) -> (Vec<Point3<f64>>, Vec<[u32; 4]>) {
+    fn rippled_tube(
+        r: f64,
+        around: usize,
+        stations: usize,
+        step: f64,
+        ripple: f64,
+    ) -> (Vec<Point3<f64>>, Vec<[u32; 4]>) {
         let mut nodes = Vec::new();
         for i in 0..stations {
             let phase = (i as f64 * step / 0.4).fract();
