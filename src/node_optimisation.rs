@@ -141,7 +141,13 @@ pub fn optimise_nodes(
     let local = |nodes: &[Point3<f64>], n: u32| -> f64 {
         incident[n as usize]
             .iter()
-            .map(|&e| element_penalty(&elements[e as usize].map(|m| nodes[m as usize]), size[e as usize], validity[e as usize]))
+            .map(|&e| {
+                element_penalty(
+                    &elements[e as usize].map(|m| nodes[m as usize]),
+                    size[e as usize],
+                    validity[e as usize],
+                )
+            })
             .sum()
     };
     // The shortest edge at each free node, from the start (the step's scale).

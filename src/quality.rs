@@ -173,7 +173,7 @@ pub fn validity_unless_below(c: &[Point3<f64>; 8], floor: f64) -> f64 {
 /// measured by its scaled Jacobian, so that the optimisers see it being untangled (its pyramids
 /// are all -1 until its volume turns positive).
 pub fn validity_from(scaled_jacobian: f64, face_pyramid: f64) -> f64 {
-    if face_pyramid > Bars::MIN_FACE_PYRAMID || !(scaled_jacobian > 0.0) {
+    if face_pyramid > Bars::MIN_FACE_PYRAMID || scaled_jacobian.is_nan() || scaled_jacobian <= 0.0 {
         scaled_jacobian
     } else {
         scaled_jacobian.min(face_pyramid)
