@@ -50,7 +50,7 @@ impl SurfaceGraph {
 
 /// Passes of neighbour averaging of the wall directions: enough to calm the voxel ripples of
 /// segmented surfaces, few enough to keep the shape.
-pub(crate) const NORMAL_SMOOTHING_PASSES: usize = 3;
+const NORMAL_SMOOTHING_PASSES: usize = 3;
 /// Further passes over the nodes of junction transitions (`JunctionWall::SmoothedNormal`).
 pub(crate) const JUNCTION_SMOOTHING_PASSES: usize = 30;
 /// Length over which the directions are smoothed at the least (the spread of the smoothing along
@@ -105,7 +105,7 @@ pub(crate) fn surface_normals(
             .iter()
             .map(|&i| {
                 let nb = &graph.neighbours[i];
-                let mut sum = normal[i] * (2.0 + 4usize.saturating_sub(nb.len()) as f64);
+                let mut sum = normal[i] * own_weight(nb.len());
                 for &j in nb {
                     sum += normal[j];
                 }
@@ -149,6 +149,13 @@ pub(crate) fn surface_normals(
     normal
 }
 
+/// A node's own weight in an averaging pass, its neighbours' being one each: two, and one more
+/// for each neighbour it lacks of four (a vessel end's ring), so a pass moves a direction as far
+/// everywhere.
+fn own_weight(neighbours: usize) -> f64 {
+    2.0 + 4usize.saturating_sub(neighbours) as f64
+}
+
 fn unit(v: Vector3<f64>, fallback: Vector3<f64>) -> Vector3<f64> {
     if v.norm() > 0.0 {
         v.normalize()
@@ -171,7 +178,7 @@ fn passes_fall_short(nodes: &[Point3<f64>], graph: &SurfaceGraph, reach: &[f64])
             let p = nodes[s as usize];
             let shortest_squared =
                 nb.iter().map(|&j| (nodes[graph.nodes[j] as usize] - p).norm_squared()).fold(f64::INFINITY, f64::min);
-            let weights = 2.0 + 4usize.saturating_sub(nb.len()) as f64 + nb.len() as f64;
+            let weights = own_weight(nb.len()) + nb.len() as f64;
             let variance = NORMAL_SMOOTHING_PASSES as f64 * 2.0 * shortest_squared / weights;
             (shortest_squared.is_finite() && shortest_squared > 0.0).then(|| reach * reach / variance)
         })
