@@ -796,7 +796,9 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     crate::finishing::check_wall_surfaces(config)?;
     let output = claim_output(&request.output, &inputs, config, request.force)?;
     let limits = ReadLimits::within(request.max_memory);
-    let mut progress = Progress::new(request.quiet, 9 + crate::finishing::stages(config));
+    // The stages of `mesh_finished`, and surface hygiene, and the extraction when no centerlines are given.
+    let stages = 10 + u64::from(request.centerlines.is_none()) + crate::finishing::stages(config);
+    let mut progress = Progress::new(request.quiet, stages);
     progress.stage("reading");
     let (surface, _) = read_surface_within(&request.surface, config.units, &limits)?;
     let centerline_units = request.centerline_units.unwrap_or(config.units);
@@ -1155,6 +1157,7 @@ pub fn mesh_surface(
     config.validate()?;
     crate::finishing::check_wall_surfaces(config)?;
     settings.warnings.extend(config.warnings());
+    progress.stage("surface hygiene");
     let (surface, hygiene) = clean_surface(surface)?;
     settings.warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
     let (centerlines, centerline_source, found_ends) = match centerlines {
@@ -1163,6 +1166,7 @@ pub fn mesh_surface(
             (centerlines, source, None)
         }
         CenterlineSource::Extract(options) => {
+            progress.stage("centerline extraction");
             let extraction = crate::centerline_extract::extract_centerlines(&surface, &options)?;
             settings.warnings.extend(extraction.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
             let ends = Some((extraction.ends, extraction.inlet));

@@ -677,15 +677,30 @@ fn improve_junction_nodes(
         .collect();
     // The worst element, each by its `validity`, or, once it is at most `floor`, some value at
     // most `floor`: a trial move is only ever compared with a floor.
-    let worst = |nodes: &[Point3<f64>], elements: &[usize], floor: f64| -> f64 {
+    // `first`, the element that was worst before the move, is measured first: a move that
+    // does not help mostly fails there.
+    let worst = |nodes: &[Point3<f64>], elements: &[usize], first: usize, floor: f64| -> f64 {
         let mut min = f64::INFINITY;
-        for &e in elements {
+        for &e in std::iter::once(&first).chain(elements.iter().filter(|&&e| e != first)) {
             min = min.min(validity[e].unless_below(&lumen[e].map(|n| nodes[n as usize]), floor));
             if min <= floor {
                 break;
             }
         }
         min
+    };
+    // Each element's validity, known until one of its corners moves: a node's elements are
+    // measured before each trial move, mostly unchanged since the last.
+    let mut known: Vec<Option<f64>> = vec![None; lumen.len()];
+    let worst_cached = |known: &mut [Option<f64>], nodes: &[Point3<f64>], elements: &[usize]| -> f64 {
+        elements
+            .iter()
+            .map(|&e| {
+                *known[e].get_or_insert_with(|| {
+                    validity[e].unless_below(&lumen[e].map(|n| nodes[n as usize]), f64::NEG_INFINITY)
+                })
+            })
+            .fold(f64::INFINITY, f64::min)
     };
     // A node tried without moving gives the same answer again until a corner of one of its
     // elements moves, so it is skipped until then (the result is the same as trying it).
@@ -711,7 +726,7 @@ fn improve_junction_nodes(
     let mut worst_after: Vec<f64> = Vec::new();
     for sweep in 0..MAX_OPTIMISATION_SWEEPS {
         if sweep >= OPTIMISATION_SWEEPS {
-            let now = worst(nodes, &all_incident, f64::NEG_INFINITY);
+            let now = worst_cached(&mut known, nodes, &all_incident);
             let stalled = worst_after.len() >= STALLED_SWEEPS
                 && now <= worst_after[worst_after.len() - STALLED_SWEEPS] + STALLED_GAIN;
             if now > QUALITY_BAR_SJ || stalled {
@@ -734,7 +749,11 @@ fn improve_junction_nodes(
             }
             let centroid = nb.iter().fold(Vector3::zeros(), |acc, &j| acc + nodes[j as usize].coords) / nb.len() as f64;
             let old = nodes[n as usize];
-            let before = worst(nodes, elements, f64::NEG_INFINITY);
+            let before = worst_cached(&mut known, nodes, elements);
+            let first = *elements
+                .iter()
+                .min_by(|&&a, &&b| known[a].unwrap_or(f64::INFINITY).total_cmp(&known[b].unwrap_or(f64::INFINITY)))
+                .expect("a node's elements");
             let mut moved = false;
             let place = |p: Point3<f64>| match movable[n as usize] {
                 Freedom::OnSurface => surface.closest(&p).point,
@@ -743,7 +762,7 @@ fn improve_junction_nodes(
             };
             for step in [1.0, 0.5, 0.25] {
                 nodes[n as usize] = place(old + (Point3::from(centroid) - old) * step);
-                if worst(nodes, elements, before + 1e-9) > before + 1e-9 {
+                if worst(nodes, elements, first, before + 1e-9) > before + 1e-9 {
                     moved = true;
                     break;
                 }
@@ -757,7 +776,7 @@ fn improve_junction_nodes(
                 for scale in [0.2, 0.05] {
                     for d in [Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y(), Vector3::z(), -Vector3::z()] {
                         nodes[n as usize] = place(old + d * (h * scale));
-                        let q = worst(nodes, elements, best.0 + 1e-9);
+                        let q = worst(nodes, elements, first, best.0 + 1e-9);
                         if q > best.0 + 1e-9 {
                             best = (q, nodes[n as usize]);
                         }
@@ -770,6 +789,7 @@ fn improve_junction_nodes(
                 moves += 1;
                 moved_at.insert(n, moves);
                 still_since.remove(&n);
+                elements.iter().for_each(|&e| known[e] = None);
             } else {
                 still_since.insert(n, moves);
             }

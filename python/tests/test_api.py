@@ -236,7 +236,7 @@ def test_progress_and_the_gil(repo):
         counter["n"] += 1
     worker.join()
     names = [n for n, _ in seen]
-    assert names == ["reading", "surface index", "centerline", "projection", "volume", "annotation", "surface accuracy"]
+    assert names == ["reading", "surface hygiene", "surface index", "centerline", "projection", "volume", "annotation", "surface accuracy"]
     at = dict(seen)
     assert at["annotation"] - at["projection"] > 1000, seen
     # A callback that raises stops nothing half-way and its exception comes back.

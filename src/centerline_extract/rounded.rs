@@ -60,23 +60,35 @@ pub fn rounded_ends(graph: &BallGraph, tree: &[u32], start_alone: bool, beside_o
 /// inside); `INFINITY` when farther than the largest tree ball's diameter from every tree node.
 fn gaps(graph: &BallGraph, in_tree: &[bool]) -> Vec<f64> {
     use kiddo::{ImmutableKdTree, SquaredEuclidean};
+    use rayon::prelude::*;
     let members: Vec<usize> = (0..in_tree.len()).filter(|&i| in_tree[i]).collect();
     let points: Vec<[f64; 3]> = members.iter().map(|&i| graph.nodes[i].centre.into()).collect();
     let Ok(kd) = ImmutableKdTree::<f64, 3>::new_from_slice(&points) else { return vec![f64::INFINITY; in_tree.len()] };
-    let reach = 2.0 * members.iter().map(|&i| graph.nodes[i].radius).fold(0.0, f64::max);
+    let widest = members.iter().map(|&i| graph.nodes[i].radius).fold(0.0, f64::max);
+    let reach = 2.0 * widest;
+    let gap_to = |b: &super::medial::Ball, item: u32| {
+        let t = graph.nodes[members[item as usize]];
+        (t.centre - b.centre).norm() - t.radius
+    };
     graph
         .nodes
-        .iter()
+        .par_iter()
         .map(|b| {
+            // The nearest centre bounds the gap; only balls centred within that bound plus the
+            // widest radius can close it further.
+            let nearest = kd.query(&b.centre.into()).nearest_one::<SquaredEuclidean<f64>>().execute();
+            if nearest.distance > reach * reach {
+                return f64::INFINITY;
+            }
+            let bound = gap_to(b, nearest.item) + widest;
+            let within = bound.min(reach);
             kd.query(&b.centre.into())
-                .within::<SquaredEuclidean<f64>>(reach * reach)
+                .within::<SquaredEuclidean<f64>>(within * within)
+                .unsorted()
                 .execute()
                 .iter()
-                .map(|h| {
-                    let t = graph.nodes[members[h.item as usize]];
-                    (t.centre - b.centre).norm() - t.radius
-                })
-                .fold(f64::INFINITY, f64::min)
+                .map(|h| gap_to(b, h.item))
+                .fold(gap_to(b, nearest.item), f64::min)
         })
         .collect()
 }
