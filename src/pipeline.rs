@@ -8,6 +8,7 @@ use crate::centerline::{Branch, CenterlineSample};
 use crate::centerline::{CenterlineTree, ForcedMerge};
 use crate::centerline_extract::{EndKind, VesselEnd};
 use crate::config::{MeshConfig, WallGrowth};
+use crate::end_planes::EndCaps;
 use crate::error::{Error, Result};
 use crate::input::{
     clean_surface, read_centerlines_within, read_surface_within, Centerlines, HygieneReport, ReadLimits,
@@ -43,8 +44,18 @@ pub use crate::meshed::Meshed;
 /// lies at each end (junction, fold, transition length).
 struct BranchPlan {
     branch: Branch,
+    /// The flat caps its end sections were turned into.
+    caps: EndCaps,
     start: Option<(usize, FoldEnd, f64)>,
     end: Option<(usize, FoldEnd, f64)>,
+}
+
+/// The median of a branch's inscribed radii: its radius near a cap, where the inscribed ball
+/// is cut by the cap.
+fn median_radius(branch: &Branch) -> f64 {
+    let mut radii: Vec<f64> = branch.samples.iter().map(|s| s.radius).collect();
+    radii.sort_by(f64::total_cmp);
+    radii[radii.len() / 2]
 }
 
 /// Turns every branch's frames so that its template lies on the folds of its junctions: a
@@ -63,6 +74,8 @@ fn plan_branches<'a>(
         .map(|(b, branch)| {
             let setup = &setup_of(b);
             let mut branch = branch.clone();
+            let radius = median_radius(&branch);
+            let caps = crate::end_planes::turn_to_caps(&mut branch, setup.surface, radius);
             let len = branch.length();
             let at_junction = |j: Option<usize>, at_start: bool| -> Result<Option<(usize, usize, Option<f64>)>> {
                 j.map(|j| {
@@ -132,6 +145,7 @@ fn plan_branches<'a>(
             }
             Ok(BranchPlan {
                 branch,
+                caps,
                 start: start.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, 0, setup.template), l)),
                 end: end.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, q_end, setup.template), l)),
             })
@@ -559,7 +573,7 @@ pub fn mesh_tree(
                 e.map(|(j, fold, length)| JunctionEnd { geometry: &junctions[j], fold, transition_length: length })
             };
             let (start, finish) = (end(&plan.start), end(&plan.end));
-            project_branch(&plan.branch, b, &setup_of(b), start.as_ref(), finish.as_ref())
+            project_branch(&plan.branch, &plan.caps, b, &setup_of(b), start.as_ref(), finish.as_ref())
         })
         .collect::<Result<_>>()?;
 

@@ -10,6 +10,7 @@
 
 use crate::blocks::SectionTemplate;
 use crate::centerline::{Branch, CenterlineSample};
+use crate::end_planes::EndCaps;
 use crate::error::{Error, Result};
 use crate::junction::{transition_points, FoldEnd, JunctionGeometry, TransitionPoints};
 use crate::surface::LumenSurface;
@@ -170,9 +171,11 @@ pub struct ProjectionSetup<'a> {
 
 /// Finds the meshable part of a branch and projects its stations: ordinary sections between
 /// the vessel's ends (trimmed as the surface requires) or the transitions towards junctions,
-/// then the transition sections down to each folded end.
+/// then the transition sections down to each folded end. `caps` are the flat caps its end
+/// sections were turned into (see [`crate::end_planes`]).
 pub fn project_branch(
     branch: &Branch,
+    caps: &EndCaps,
     index: usize,
     setup: &ProjectionSetup,
     start_junction: Option<&JunctionEnd>,
@@ -211,13 +214,27 @@ pub fn project_branch(
     }
     // Only the samples away from junctions decide where a vessel end is clean.
     let inside: Vec<usize> = (0..samples.len()).filter(|&i| samples[i].s >= lo && samples[i].s <= hi).collect();
-    let probes: Vec<(usize, Probe)> =
-        inside.par_iter().map(|&i| (i, cast_section(template, surface, &samples[i], orient).0)).collect();
+    // A section turned into a flat cap (`end_planes`) meets the cap only where a ray ends on its
+    // plane; otherwise it is clean when valid, however steeply the wall flares from the cap.
+    let cast: Vec<(usize, Probe, bool)> = inside
+        .par_iter()
+        .map(|&i| {
+            let (probe, section) = cast_section(template, surface, &samples[i], orient);
+            let clean = match caps.turning_at(samples[i].s, length) {
+                Some(cap) => probe.valid() && !section.surface.iter().any(|p| cap.holds(p)),
+                None => probe.clean(),
+            };
+            (i, probe, clean)
+        })
+        .collect();
+    let mut clean = vec![false; samples.len()];
+    cast.iter().for_each(|&(i, _, c)| clean[i] = c);
+    let probes: Vec<(usize, Probe)> = cast.into_iter().map(|(i, p, _)| (i, p)).collect();
 
     // A junction end needs no clean section (no cap can be there): every section is checked
     // valid below.
-    let first_clean = probes.iter().find(|(_, p)| p.clean() || start_junction.is_some()).map(|(i, _)| *i);
-    let last_clean = probes.iter().rev().find(|(_, p)| p.clean() || end_junction.is_some()).map(|(i, _)| *i);
+    let first_clean = probes.iter().find(|(i, _)| clean[*i] || start_junction.is_some()).map(|(i, _)| *i);
+    let last_clean = probes.iter().rev().find(|(i, _)| clean[*i] || end_junction.is_some()).map(|(i, _)| *i);
     let (i0, i1) = match (first_clean, last_clean) {
         (Some(a), Some(b)) if a < b || (a == b && (start_junction.is_some() || end_junction.is_some())) => (a, b),
         _ => {
@@ -236,18 +253,25 @@ pub fn project_branch(
             )));
         }
     };
-    // A closed end (every ray of the end sample hits): keep a margin from the cap.
+    // A closed end (every ray of the end sample hits): keep a margin from the cap, unless the
+    // sections were turned into its plane (they run parallel to it, clear of it).
     let inlet_closed = start_junction.is_none() && probes[0].1.valid();
     let outlet_closed = end_junction.is_none() && probes[probes.len() - 1].1.valid();
     let r0 = samples[i0].radius;
     let r1 = samples[i1].radius;
     let s_start = match start_junction {
         Some(_) => lo,
-        None => samples[i0].s + r0 * (trim_inlet + if inlet_closed { CLOSED_END_MARGIN } else { 0.0 }),
+        None => {
+            samples[i0].s
+                + r0 * (trim_inlet + if inlet_closed && caps.start.is_none() { CLOSED_END_MARGIN } else { 0.0 })
+        }
     };
     let s_end = match end_junction {
         Some(_) => hi,
-        None => samples[i1].s - r1 * (trim_outlet + if outlet_closed { CLOSED_END_MARGIN } else { 0.0 }),
+        None => {
+            samples[i1].s
+                - r1 * (trim_outlet + if outlet_closed && caps.end.is_none() { CLOSED_END_MARGIN } else { 0.0 })
+        }
     };
     if let Some((bad, p)) = probes.iter().find(|(i, p)| {
         samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !p.valid()

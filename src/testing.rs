@@ -33,6 +33,33 @@ pub fn straight_tube_surface(radius: f64, length: f64, around: usize, rings: usi
     TriangleSurface { vertices, triangles, triangle_tags: None, source: "straight-tube (in memory)".into() }
 }
 
+/// A tube of radius `radius` along +z, from a flat cap in the plane z = x tan(`tilt`) (fanned
+/// from its centre at the origin) to z = `length` (open): a vessel clipped off square.
+pub fn tilted_cap_tube_surface(radius: f64, length: f64, tilt: f64) -> TriangleSurface {
+    let (around, rings) = (48, 40);
+    let mut vertices = Vec::with_capacity(around * (rings + 1) + 1);
+    for j in 0..=rings {
+        for i in 0..around {
+            let a = std::f64::consts::TAU * i as f64 / around as f64;
+            let (x, y) = (radius * a.cos(), radius * a.sin());
+            let z0 = x * tilt.tan();
+            vertices.push(Point3::new(x, y, z0 + (length - z0) * j as f64 / rings as f64));
+        }
+    }
+    let centre = vertices.len() as u32;
+    vertices.push(Point3::origin());
+    let v = |i: usize, j: usize| (j * around + i % around) as u32;
+    let mut triangles = Vec::with_capacity(around * (2 * rings + 1));
+    for i in 0..around {
+        triangles.push([centre, v(i + 1, 0), v(i, 0)]);
+        for j in 0..rings {
+            triangles.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
+            triangles.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
+        }
+    }
+    TriangleSurface { vertices, triangles, triangle_tags: None, source: "tilted-cap tube (in memory)".into() }
+}
+
 /// The exact centerline of [`straight_tube_surface`].
 pub fn straight_tube_centerline(radius: f64, length: f64) -> Centerlines {
     let n = 60;

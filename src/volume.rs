@@ -1084,7 +1084,7 @@ mod tests {
                     trim_outlet: 0.0,
                     normals_outward: true,
                 };
-                project_branch(&tree.branches[0], b, &setup, None, None).unwrap()
+                project_branch(&tree.branches[0], &Default::default(), b, &setup, None, None).unwrap()
             })
             .collect();
         let layers = config.wall.layers();
