@@ -97,6 +97,18 @@ pub struct Junction {
 }
 
 impl Branch {
+    /// The one branch of an unbranched vessel, from its inlet to its outlet.
+    pub fn lone(samples: Vec<CenterlineSample>) -> Branch {
+        Branch {
+            name: "branch_0".into(),
+            parent: None,
+            daughters: vec![],
+            samples,
+            start_junction: None,
+            end_junction: None,
+        }
+    }
+
     pub fn length(&self) -> f64 {
         self.samples.last().map_or(0.0, |s| s.s)
     }
@@ -178,14 +190,7 @@ impl CenterlineTree {
                 }
             }
             let samples = build_samples(&line, config, FirstFrame::Hint, false)?;
-            let branch = Branch {
-                name: "branch_0".into(),
-                parent: None,
-                daughters: vec![],
-                samples,
-                start_junction: None,
-                end_junction: None,
-            };
+            let branch = Branch::lone(samples);
             return Ok(CenterlineTree { branches: vec![branch], junctions: vec![], segments: vec![0] });
         }
         let tags: Vec<_> = centerlines.polylines.iter().map(|l| l.cell_tags.clone()).collect();

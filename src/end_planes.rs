@@ -158,14 +158,7 @@ mod tests {
                 CenterlineSample { s, point: Point3::new(0.0, 0.0, s), radius: r, frame }
             })
             .collect();
-        Branch {
-            name: "branch_0".into(),
-            parent: None,
-            daughters: vec![],
-            samples,
-            start_junction: None,
-            end_junction: None,
-        }
+        Branch::lone(samples)
     }
 
     #[test]
