@@ -452,7 +452,7 @@ pub fn mesh_vessel(
         Err(e) => Some(unanalysable_close_junction(&tree, &lumen_surface).ok_or(e)?),
     };
     let Some(overlap) = overlap else {
-        return mesh_tree(surface, &lumen_surface, tree, &centerlines.source, config, progress);
+        return mesh_tree(surface, &lumen_surface, tree, &centerlines.source, config, true, progress);
     };
     // Two junctions overlap: they become one, centred on the branch between them. Where along
     // it depends on the branches around (the middle of the merged junction is neither end), so
@@ -463,7 +463,7 @@ pub fn mesh_vessel(
     let mut first_error = None;
     for at in MERGED_CENTRE_AT {
         let attempt = merged_tree(centerlines, config, &lumen_surface, segment, at)
-            .and_then(|tree| mesh_tree(surface, &lumen_surface, tree, &centerlines.source, config, progress));
+            .and_then(|tree| mesh_tree(surface, &lumen_surface, tree, &centerlines.source, config, false, progress));
         match attempt {
             Ok(meshed) => {
                 let quality = FinishQuality::of_mesh(&meshed.mesh);
@@ -525,12 +525,14 @@ fn merged_tree(
 }
 
 /// Meshes a vessel from its indexed surface and its centerline tree (both in mm).
+/// `steep_short_branches`: see [`ProjectionSetup::steep_short_branches`].
 pub fn mesh_tree(
     surface: &TriangleSurface,
     lumen_surface: &LumenSurface,
     tree: CenterlineTree,
     centerline_source: &Path,
     config: &MeshConfig,
+    steep_short_branches: bool,
     progress: &mut Progress,
 ) -> Result<Meshed> {
     check_units(lumen_surface, &tree, centerline_source)?;
@@ -563,6 +565,7 @@ pub fn mesh_tree(
         trim_inlet: config.centerline.trim_inlet,
         trim_outlet: config.centerline.trim_outlet,
         normals_outward,
+        steep_short_branches,
     };
     let plans = plan_branches(&tree, &junctions, &setup_of)?;
     let projected: Vec<ProjectedBranch> = plans

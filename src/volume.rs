@@ -1083,6 +1083,7 @@ mod tests {
                     trim_inlet: 0.0,
                     trim_outlet: 0.0,
                     normals_outward: true,
+                    steep_short_branches: false,
                 };
                 project_branch(&tree.branches[0], &Default::default(), b, &setup, None, None).unwrap()
             })
