@@ -415,8 +415,9 @@ const NEAREST_SECTION: f64 = 0.5;
 
 /// The distance from a junction's centre, along a branch, of its last ordinary section: the
 /// geometric estimate of [`crate::junction::transition_length`], moved away from the junction
-/// until the section and the next radius of the branch are clear of the other branches. None
-/// when the branch runs to another junction and no section of this junction's half of it is
+/// until the section and the next radius of the branch are clear of the other branches (or, on
+/// a branch ending short of the estimate, towards the junction when `steep_short_branches`
+/// allows). None when the branch runs to another junction and no section of this junction's half of it is
 /// clear: the branch is then a bridge (see [`bridge`]).
 pub fn clear_transition_length(
     geometry: &JunctionGeometry,
