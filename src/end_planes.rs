@@ -6,8 +6,9 @@
 //! `projection`): that length of vessel is lost. Turning the end's sections into the cap's
 //! plane, and back square over two radii, keeps the mesh up to the cap, with end faces in its
 //! plane (where a solver's inlet or outlet condition is set). On
-//! sphinxsys_pulmonary_bifurcation, whose trunk is 15 mm wide, 19 mm long and capped 11
-//! degrees off square, the 2.5 mm lost were all the trunk had left beside its junction.
+//! sphinxsys_pulmonary_bifurcation, whose trunk has a radius of 15 mm, is 19 mm long and is
+//! capped 11 degrees off square, the 2.5 mm lost were nearly all of the 3 mm the trunk had left
+//! beside its junction.
 
 use crate::centerline::{Branch, Frame};
 use crate::surface::LumenSurface;
