@@ -222,21 +222,26 @@ pub fn project_branch(
     }
     // Only the samples away from junctions decide where a vessel end is clean.
     let inside: Vec<usize> = (0..samples.len()).filter(|&i| samples[i].s >= lo && samples[i].s <= hi).collect();
-    let cast: Vec<(usize, Probe, bool)> = inside
+    // Each probe, and for a section turned into a flat cap (`end_planes`) whether a ray ends on
+    // the cap's plane.
+    let cast: Vec<(usize, Probe, Option<bool>)> = inside
         .par_iter()
         .map(|&i| {
             let (probe, section) = cast_section(template, surface, &samples[i], orient);
             let cap = caps.turning_at(samples[i].s, length);
-            let on_cap = cap.is_some_and(|cap| section.surface.iter().any(|p| cap.holds(p)));
+            let on_cap = cap.map(|cap| section.surface.iter().any(|p| cap.holds(p)));
             (i, probe, on_cap)
         })
         .collect();
-    // A closed end (every ray of its end section meets the wall) that is no turned flat cap.
-    let dome_start = start_junction.is_none() && caps.start.is_none() && cast.first().is_some_and(|c| c.1.valid());
-    let dome_end = end_junction.is_none() && caps.end.is_none() && cast.last().is_some_and(|c| c.1.valid());
-    // A clean section meets the vessel's wall, not its end. A section turned into a flat cap
-    // (`end_planes`) meets the cap only where a ray ends on its plane, however steeply the wall
-    // flares from the cap; the others by the hit triangles' lean (see CAP_NORMAL_COS).
+    // A closed end (every ray of the end sample hits) ...
+    let inlet_closed = start_junction.is_none() && cast.first().is_some_and(|c| c.1.valid());
+    let outlet_closed = end_junction.is_none() && cast.last().is_some_and(|c| c.1.valid());
+    // ... whose sections were not turned into a flat cap: a dome (or a square cap).
+    let dome_start = inlet_closed && caps.start.is_none();
+    let dome_end = outlet_closed && caps.end.is_none();
+    // A clean section meets the vessel's wall, not its end. A turned section meets the cap only
+    // where a ray ends on its plane, however steeply the wall flares from the cap; the others
+    // by the hit triangles' lean (see CAP_NORMAL_COS).
     let mut clean = vec![false; samples.len()];
     for (i, probe, on_cap) in &cast {
         let s = samples[*i].s;
@@ -246,8 +251,8 @@ pub fn project_branch(
             CAP_NORMAL_COS
         };
         clean[*i] = probe.valid()
-            && match caps.turning_at(s, length) {
-                Some(_) => !on_cap,
+            && match on_cap {
+                Some(on_cap) => !on_cap,
                 None => probe.axial_normal < limit,
             };
     }
@@ -275,25 +280,17 @@ pub fn project_branch(
             )));
         }
     };
-    // A closed end (every ray of the end sample hits): keep a margin from the cap, unless the
-    // sections were turned into its plane (they run parallel to it, clear of it).
-    let inlet_closed = start_junction.is_none() && probes[0].1.valid();
-    let outlet_closed = end_junction.is_none() && probes[probes.len() - 1].1.valid();
+    // A closed end keeps a margin from its cap, unless the sections were turned into the cap's
+    // plane (they run parallel to it, clear of it).
     let r0 = samples[i0].radius;
     let r1 = samples[i1].radius;
     let s_start = match start_junction {
         Some(_) => lo,
-        None => {
-            samples[i0].s
-                + r0 * (trim_inlet + if inlet_closed && caps.start.is_none() { CLOSED_END_MARGIN } else { 0.0 })
-        }
+        None => samples[i0].s + r0 * (trim_inlet + if dome_start { CLOSED_END_MARGIN } else { 0.0 }),
     };
     let s_end = match end_junction {
         Some(_) => hi,
-        None => {
-            samples[i1].s
-                - r1 * (trim_outlet + if outlet_closed && caps.end.is_none() { CLOSED_END_MARGIN } else { 0.0 })
-        }
+        None => samples[i1].s - r1 * (trim_outlet + if dome_end { CLOSED_END_MARGIN } else { 0.0 }),
     };
     if let Some((bad, p)) = probes.iter().find(|(i, p)| {
         samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !p.valid()

@@ -36,28 +36,18 @@ pub fn straight_tube_surface(radius: f64, length: f64, around: usize, rings: usi
 /// A tube of radius `radius` along +z, from a flat cap in the plane z = x tan(`tilt`) (fanned
 /// from its centre at the origin) to z = `length` (open): a vessel clipped off square.
 pub fn tilted_cap_tube_surface(radius: f64, length: f64, tilt: f64) -> TriangleSurface {
-    let (around, rings) = (48, 40);
-    let mut vertices = Vec::with_capacity(around * (rings + 1) + 1);
-    for j in 0..=rings {
-        for i in 0..around {
-            let a = std::f64::consts::TAU * i as f64 / around as f64;
-            let (x, y) = (radius * a.cos(), radius * a.sin());
-            let z0 = x * tilt.tan();
-            vertices.push(Point3::new(x, y, z0 + (length - z0) * j as f64 / rings as f64));
-        }
+    let around = 48;
+    let mut tube = straight_tube_surface(radius, length, around, 40);
+    // Each ring's share of the length kept, measured from the cap's plane instead of z = 0.
+    for p in &mut tube.vertices {
+        let z0 = p.x * tilt.tan();
+        p.z = z0 + (length - z0) * p.z / length;
     }
-    let centre = vertices.len() as u32;
-    vertices.push(Point3::origin());
-    let v = |i: usize, j: usize| (j * around + i % around) as u32;
-    let mut triangles = Vec::with_capacity(around * (2 * rings + 1));
-    for i in 0..around {
-        triangles.push([centre, v(i + 1, 0), v(i, 0)]);
-        for j in 0..rings {
-            triangles.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
-            triangles.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
-        }
-    }
-    TriangleSurface { vertices, triangles, triangle_tags: None, source: "tilted-cap tube (in memory)".into() }
+    let centre = tube.vertices.len() as u32;
+    tube.vertices.push(Point3::origin());
+    tube.triangles.extend((0..around as u32).map(|i| [centre, (i + 1) % around as u32, i]));
+    tube.source = "tilted-cap tube (in memory)".into();
+    tube
 }
 
 /// The exact centerline of [`straight_tube_surface`].
