@@ -62,8 +62,8 @@ impl SurfaceAccuracy {
         (d > UNMESHED_RADII * r).then(|| {
             format!(
                 "the surface at ({:.3}, {:.3}, {:.3}) mm lies {d:.2} mm ({:.1} vessel radii) from the mesh: a sac, \
-                 bleb or side branch there is not meshed (the O-grid follows the centerlines; an end given there \
-                 with --ends meshes it as a branch)",
+                 bleb or side branch there is not meshed (the O-grid follows the centerlines; a point there given \
+                 with --sacs meshes a sac closed by a dome, with --ends a branch with an outlet)",
                 p.x,
                 p.y,
                 p.z,
@@ -138,11 +138,11 @@ pub fn surface_accuracy(
             let last = &p.sections[p.sections.len() - 1].station;
             let start_ok = match p.start {
                 BranchEnd::Vessel { .. } => s >= p.s_start && (v - first.point).dot(&first.frame.tangent) >= 0.0,
-                BranchEnd::Fold(_) => true,
+                BranchEnd::Fold(_) | BranchEnd::Dome => true,
             };
             let end_ok = match p.end {
                 BranchEnd::Vessel { .. } => s <= p.s_end && (v - last.point).dot(&last.frame.tangent) <= 0.0,
-                BranchEnd::Fold(_) => true,
+                BranchEnd::Fold(_) | BranchEnd::Dome => true,
             };
             start_ok && end_ok
         })

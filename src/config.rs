@@ -62,6 +62,10 @@ pub struct CenterlineConfig {
     /// The inlet of a branching tree, millimetres: the vessel end nearest this point. Without
     /// it: the first point of a single polyline, or the end of largest radius of a tree.
     pub inlet_mm: Option<[f64; 3]>,
+    /// Domes of saccular aneurysms, millimetres: a branch that ends within its end radius of one
+    /// of these points is a blind branch closed by a dome of hexes (no end face), not an outlet.
+    /// Filled from the ends of kind "sac" when the centerlines are computed from the surface.
+    pub sacs_mm: Vec<[f64; 3]>,
 }
 
 impl Default for CenterlineConfig {
@@ -74,6 +78,7 @@ impl Default for CenterlineConfig {
             trim_outlet: 0.0,
             junction_merge_radii: 1.0,
             inlet_mm: None,
+            sacs_mm: Vec::new(),
         }
     }
 }
@@ -720,6 +725,9 @@ impl MeshConfig {
         }
         if c.inlet_mm.is_some_and(|p| !p.iter().all(|x| x.is_finite())) {
             return bad("centerline.inlet_mm", "must be a point [x, y, z] of finite numbers (mm)");
+        }
+        if c.sacs_mm.iter().any(|p| !p.iter().all(|x| x.is_finite())) {
+            return bad("centerline.sacs_mm", "must be a list of points [x, y, z] of finite numbers (mm)");
         }
         self.febio.validate()?;
         if self.febio.static_steps > MAX_STEPS {

@@ -43,7 +43,7 @@ adventitia) grown from the lumen surface along its normal (or along the rays), w
 Parameters come from the preset, then the case file (--config, TOML), then these flags. Case-file keys (docs/guide/case-file.md):
   preset, units, output_units, formats
   [centerline] resample_step, smoothing_passes, radius_smoothing_passes, trim_inlet, trim_outlet,
-               junction_merge_radii, inlet_mm
+               junction_merge_radii, inlet_mm, sacs_mm
   [lumen] core_elements, core_size, radial_elements, growth_ratio, first_cell_height, axial_spacing,
           axial_spacing_mm, ray_reach
   [wall] thickness_ratio, thickness_mm, growth, surface, surfaces; [wall.intima] / [wall.media] /
@@ -124,6 +124,10 @@ struct MeshArgs {
     /// end, rounded caps included, is found without them).
     #[arg(long, num_args = 1..)]
     ends: Vec<String>,
+    /// Without --centerlines: points x,y,z (in --units) near the domes of saccular aneurysms not
+    /// found as such: each sac is meshed as a blind branch closed by a dome, not as an outlet.
+    #[arg(long, num_args = 1..)]
+    sacs: Vec<String>,
     /// The segmented outer wall surface (STL, VTP or VTK, in --units): the wall runs from the
     /// lumen to it, its thickness as segmented (also wall.surface in the case file).
     #[arg(long, value_name = "FILE")]
@@ -181,7 +185,7 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
         check_output_file("--branch-split", split, &[("--surface", &args.surface), ("--output", &args.output)])?;
     }
     let (surface, hygiene) = vesselhex::input::clean_surface(vesselhex::input::read_surface(&args.surface, units)?)?;
-    let extraction = extract_centerlines(&surface, &ExtractOptions { inlet, ends })?;
+    let extraction = extract_centerlines(&surface, &ExtractOptions { inlet, ends, sacs: vec![] })?;
     write_vtp(&extraction.centerlines, units.from_mm(), &args.output)?;
     let split_tree = match &args.branch_split {
         Some(path) => {
@@ -292,6 +296,7 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
             point => vesselhex::centerline_extract::InletChoice::Nearest(parse_point(point, scale)?),
         },
         ends: args.ends.iter().map(|e| parse_point(e, scale)).collect::<vesselhex::Result<Vec<_>>>()?,
+        sacs: args.sacs.iter().map(|e| parse_point(e, scale)).collect::<vesselhex::Result<Vec<_>>>()?,
     };
     let request = MeshRequest {
         surface: args.surface,

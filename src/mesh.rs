@@ -70,6 +70,12 @@ pub fn face_nodes(hex: &Hex, f: usize) -> [u32; 4] {
     [hex[t[0]], hex[t[1]], hex[t[2]], hex[t[3]]]
 }
 
+/// Whether a branch of this name is a saccular aneurysm's sac, closed by a dome (the pipeline
+/// names them "sac", or "sac_1", "sac_2", ...).
+pub fn is_sac(branch_name: &str) -> bool {
+    branch_name == "sac" || branch_name.strip_prefix("sac_").is_some_and(|k| k.parse::<usize>().is_ok())
+}
+
 /// What a hexahedron belongs to.
 ///
 /// Elements are ordered by region in this order (the derived order), so each region's elements

@@ -493,6 +493,24 @@ pub fn mesh_vessel(
     }
 }
 
+/// Which branches end blind in a saccular aneurysm's sac (see [`ends_in_sac`]), each renamed
+/// for it: "sac", or "sac_1", "sac_2", ... when there are several (see [`crate::mesh::is_sac`]).
+fn name_sacs(tree: &mut CenterlineTree, sacs_mm: &[[f64; 3]]) -> Vec<bool> {
+    let sacs: Vec<bool> = tree.branches.iter().map(|b| ends_in_sac(b, sacs_mm)).collect();
+    let count = sacs.iter().filter(|&&s| s).count();
+    for (k, b) in (0..sacs.len()).filter(|&b| sacs[b]).enumerate() {
+        tree.branches[b].name = if count == 1 { "sac".to_string() } else { format!("sac_{}", k + 1) };
+    }
+    sacs
+}
+
+/// Whether a branch ends blind in a saccular aneurysm's sac: no junction at its end, which lies
+/// within its radius of one of the sacs' points (see [`crate::config::CenterlineConfig::sacs_mm`]).
+fn ends_in_sac(branch: &crate::centerline::Branch, sacs_mm: &[[f64; 3]]) -> bool {
+    let Some(last) = branch.samples.last() else { return false };
+    branch.end_junction.is_none() && sacs_mm.iter().any(|p| (Point3::from(*p) - last.point).norm() <= last.radius)
+}
+
 /// Where the junction merged from two overlapping ones is centred: fractions of the branch
 /// between them from the upstream one. Measured on gmsh_aortic_arch (the brachiocephalic-carotid
 /// trunk, whose arch-side crotch lies past its far end): all three mesh at the coarse preset,
@@ -529,7 +547,7 @@ fn merged_tree(
 pub fn mesh_tree(
     surface: &TriangleSurface,
     lumen_surface: &LumenSurface,
-    tree: CenterlineTree,
+    mut tree: CenterlineTree,
     centerline_source: &Path,
     config: &MeshConfig,
     steep_short_branches: bool,
@@ -557,6 +575,7 @@ pub fn mesh_tree(
         .into_iter()
         .map(|(nx, ny)| SectionTemplate::rect(nx, ny, l.core_size, l.ray_reach))
         .collect();
+    let sacs = name_sacs(&mut tree, &config.centerline.sacs_mm);
     let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
     let setup_of = |b: usize| ProjectionSetup {
         template: &templates[b],
@@ -566,6 +585,7 @@ pub fn mesh_tree(
         trim_outlet: config.centerline.trim_outlet,
         normals_outward,
         steep_short_branches,
+        dome_end: sacs[b],
     };
     let plans = plan_branches(&tree, &junctions, &setup_of)?;
     let projected: Vec<ProjectedBranch> = plans
@@ -903,6 +923,7 @@ fn end_kind(end: &crate::projection::BranchEnd) -> &'static str {
         crate::projection::BranchEnd::Vessel { closed: true } => "closed",
         crate::projection::BranchEnd::Vessel { closed: false } => "open",
         crate::projection::BranchEnd::Fold(_) => "junction",
+        crate::projection::BranchEnd::Dome => "dome",
     }
 }
 
@@ -1196,7 +1217,7 @@ pub fn mesh_surface(
     let mut estimate = crate::resources::estimate_mesh(&centerlines, radius, config, surface.triangles.len());
     crate::finishing::scale_estimate(&mut estimate, config);
     crate::resources::check_fits(&estimate, settings.max_memory, &centerline_source)?;
-    let tree_config = keep_extracted_inlet(config, found_ends.as_ref());
+    let tree_config = keep_extracted_ends(config, found_ends.as_ref());
     let mut meshed =
         mesh_vessel(&surface, &centerlines, &tree_config, progress).map_err(|e| name_winding(e, &surface))?;
     let limits = ReadLimits::within(settings.max_memory);
@@ -1206,11 +1227,16 @@ pub fn mesh_surface(
 }
 
 /// `config` with the inlet the centerline extraction chose (the largest end section, or the end
-/// `--inlet` names) as the centerline tree's, unless the configuration names one. Left to choose
+/// `--inlet` names) as the centerline tree's, unless the configuration names one, and the sacs it
+/// found as the domes to close (unless the configuration names them). Left to choose
 /// again, the tree would take the end with the widest vessel next to it, a daughter wider than a
 /// short trunk (sphinxsys_pulmonary_bifurcation), and report and mesh would disagree on the inlet.
-fn keep_extracted_inlet(config: &MeshConfig, found_ends: Option<&(Vec<VesselEnd>, usize)>) -> MeshConfig {
+fn keep_extracted_ends(config: &MeshConfig, found_ends: Option<&(Vec<VesselEnd>, usize)>) -> MeshConfig {
     let mut config = config.clone();
+    if let (Some((ends, _)), true) = (found_ends, config.centerline.sacs_mm.is_empty()) {
+        config.centerline.sacs_mm =
+            ends.iter().filter(|e| e.kind == EndKind::Sac).map(|e| e.centre.coords.into()).collect();
+    }
     if let (Some((ends, inlet)), None) = (found_ends, config.centerline.inlet_mm) {
         config.centerline.inlet_mm = Some(ends[*inlet].centre.coords.into());
     }

@@ -17,6 +17,9 @@ use crate::surface::LumenSurface;
 use nalgebra::{Point3, Vector2, Vector3};
 use rayon::prelude::*;
 
+mod dome;
+pub use dome::{dome_layers, DomeTop};
+
 /// Hit triangles whose normal is within this cosine of the axis mark a cap (about 70 degrees
 /// from the wall direction of a tube) ...
 const CAP_NORMAL_COS: f64 = 0.35;
@@ -55,6 +58,9 @@ pub enum BranchEnd {
     Vessel { closed: bool },
     /// A junction: the end section is folded onto the junction's pages.
     Fold(FoldEnd),
+    /// A blind branch's end (a saccular aneurysm's sac) closed by a dome of hexes: the branch's
+    /// last sections are the dome's layers, its top grid is [`ProjectedBranch::dome`].
+    Dome,
 }
 
 /// A branch's stations, all projected, in the direction of the flow.
@@ -74,6 +80,8 @@ pub struct ProjectedBranch {
     pub outlet_closed: bool,
     /// Whether the surface's triangles face out of the lumen (they may face in).
     pub normals_outward: bool,
+    /// The top of the dome closing a blind branch (its end is [`BranchEnd::Dome`]).
+    pub dome: Option<DomeTop>,
 }
 
 /// A junction end of a branch, as the projection needs it.
@@ -175,6 +183,8 @@ pub struct ProjectionSetup<'a> {
     /// the junction (see [`clear_transition_length`]). Off while a merged junction's centre is
     /// searched: a centring that leaves a branch too short is left to the next one.
     pub steep_short_branches: bool,
+    /// The branch ends blind (a saccular aneurysm's sac): its end is closed by a dome of hexes.
+    pub dome_end: bool,
 }
 
 /// Finds the meshable part of a branch and projects its stations: ordinary sections between
@@ -208,6 +218,7 @@ pub fn project_branch(
                 inlet_closed: false,
                 outlet_closed: false,
                 normals_outward,
+                dome: None,
             });
         }
     }
@@ -364,8 +375,23 @@ pub fn project_branch(
         Some(j) => BranchEnd::Fold(j.fold),
         None => BranchEnd::Vessel { closed: inlet_closed },
     };
+    let mut dome = None;
     let end = match end_junction {
         Some(j) => BranchEnd::Fold(j.fold),
+        None if setup.dome_end => {
+            let last = &out[out.len() - 1];
+            let (layers, top) = dome::project_dome(template, surface, last, spacing, orient).map_err(|cause| {
+                Error::Geometry(format!(
+                    "{}: the sac at the end of branch {name} cannot be closed by a dome beyond its last \
+                     cross-section {}: {cause}. Give centerlines that reach the sac's tip (--centerlines)",
+                    surface.source.display(),
+                    where_(&last.station)
+                ))
+            })?;
+            out.extend(layers);
+            dome = Some(top);
+            BranchEnd::Dome
+        }
         None => BranchEnd::Vessel { closed: outlet_closed },
     };
     Ok(ProjectedBranch {
@@ -378,6 +404,7 @@ pub fn project_branch(
         inlet_closed,
         outlet_closed,
         normals_outward,
+        dome,
     })
 }
 

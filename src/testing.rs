@@ -50,6 +50,40 @@ pub fn tilted_cap_tube_surface(radius: f64, length: f64, tilt: f64) -> TriangleS
     tube
 }
 
+/// A tube of radius `radius` along +z, open at z = 0, closed beyond z = `length` by a dome of
+/// height `dome_height` (half an ellipsoid; a hemisphere when it equals the radius): a blind
+/// branch, a sac's shape at its simplest.
+pub fn domed_tube_surface(radius: f64, length: f64, dome_height: f64) -> TriangleSurface {
+    let around = 64;
+    let mut tube = straight_tube_surface(radius, length, around, 60);
+    let dome_rings = 24;
+    for j in 1..dome_rings {
+        let psi = std::f64::consts::FRAC_PI_2 * (1.0 - j as f64 / dome_rings as f64);
+        for i in 0..around {
+            let a = std::f64::consts::TAU * i as f64 / around as f64;
+            let p = Point3::new(
+                radius * psi.sin() * a.cos(),
+                radius * psi.sin() * a.sin(),
+                length + dome_height * psi.cos(),
+            );
+            tube.vertices.push(p);
+        }
+    }
+    let first = (tube.vertices.len() - (dome_rings - 1) * around - around) as u32;
+    let ring = |j: usize, i: usize| first + (j * around + i % around) as u32;
+    for j in 0..dome_rings - 1 {
+        for i in 0..around {
+            tube.triangles.push([ring(j, i), ring(j, i + 1), ring(j + 1, i + 1)]);
+            tube.triangles.push([ring(j, i), ring(j + 1, i + 1), ring(j + 1, i)]);
+        }
+    }
+    let pole = tube.vertices.len() as u32;
+    tube.vertices.push(Point3::new(0.0, 0.0, length + dome_height));
+    tube.triangles.extend((0..around).map(|i| [ring(dome_rings - 1, i), ring(dome_rings - 1, i + 1), pole]));
+    tube.source = "domed tube (in memory)".into();
+    tube
+}
+
 /// The exact centerline of [`straight_tube_surface`].
 pub fn straight_tube_centerline(radius: f64, length: f64) -> Centerlines {
     let n = 60;

@@ -64,6 +64,10 @@ impl RadialLevels {
 struct BranchNodes {
     /// Per station: (N+1)^2 core ids then R * ring ids.
     stations: Vec<Vec<u32>>,
+    /// A dome's top grid (see [`crate::projection::DomeTop`]): per lumen level 0..=R, the ids of
+    /// the core grid's nodes; level 0 is the last station's core, the boundary of level l its
+    /// ring level l.
+    dome_top: Option<Vec<Vec<u32>>>,
 }
 
 /// What the volume is built from: the projected branches and the settings of the mesh.
@@ -144,8 +148,8 @@ pub fn build_volume(
             // with the same mobility), so moving them keeps the junction conformal.
             let inner_movable = sec.in_junction && (fold.is_none() || optimisation.move_pages);
             // A vessel end's section stays as it is (its nodes are the end's sets and plane).
-            let vessel_end = (i == 0 && !matches!(pb.start, BranchEnd::Fold(_)))
-                || (i == last && !matches!(pb.end, BranchEnd::Fold(_)));
+            let vessel_end = (i == 0 && matches!(pb.start, BranchEnd::Vessel { .. }))
+                || (i == last && matches!(pb.end, BranchEnd::Vessel { .. }));
             let surface_movable = optimisation.slide_surface_nodes && inner_movable && !vessel_end;
             let in_junction = sec.in_junction;
             let (poor_inner, poor_surface) =
@@ -209,8 +213,43 @@ pub fn build_volume(
             }
             stations.push(ids);
         }
-        branch_nodes.push(BranchNodes { stations });
+        // A dome's top: new nodes on the top rays, the last station's where they meet it.
+        let dome_top = pb.dome.as_ref().map(|dome| {
+            let last = &stations[stations.len() - 1];
+            let mut ring_point = vec![None; core_count];
+            for (k, &c) in template.ring_core_index.iter().enumerate() {
+                ring_point[c] = Some(k);
+            }
+            let radius = pb.sections[pb.sections.len() - 1].station.radius;
+            let mut top = vec![last[..core_count].to_vec()];
+            for (level, &rho) in levels.lumen.iter().enumerate().skip(1) {
+                let mut ids = Vec::with_capacity(core_count);
+                for (c, k) in ring_point.iter().enumerate() {
+                    if let Some(k) = k {
+                        ids.push(last[core_count + (level - 1) * m + k]);
+                        continue;
+                    }
+                    let (a, b) = (dome.origins[c], dome.surface[c]);
+                    ids.push(nodes.len() as u32);
+                    nodes.push(if rho == 1.0 { b } else { a + (b - a) * rho });
+                    node_radius.push(radius);
+                    junction_node.push(false);
+                    node_ray.push(dome.dirs[c]);
+                    movable.push(Freedom::Fixed);
+                    poor_mobility.push(if level < r_cells { Freedom::Free } else { Freedom::OnSurface });
+                }
+                top.push(ids);
+            }
+            top
+        });
+        branch_nodes.push(BranchNodes { stations, dome_top });
     }
+    // A hex of a dome's top between two of its levels over core quad `q`, in the canonical order
+    // (radial = from `below` to `above`, circumferential along the quad's first edge, axial
+    // along its last: on the top, the radial direction is the tangent's, and t x n = b).
+    let top_hex = |below: &[u32], above: &[u32], q: &[usize; 4]| -> Hex {
+        [below[q[0]], above[q[0]], above[q[1]], below[q[1]], below[q[3]], above[q[3]], above[q[2]], below[q[2]]]
+    };
     let lumen_ring = |b: usize, i: usize, level: usize, k: usize| -> u32 {
         let st = &branch_nodes[b].stations[i];
         let template = &templates[b];
@@ -236,6 +275,12 @@ pub fn build_volume(
                     lumen_ring(b, i + 1, r_cells, k),
                 ]);
             }
+        }
+        if let Some(top) = &branch_nodes[b].dome_top {
+            let surface = &top[r_cells];
+            quads.extend(
+                templates[b].core_quads().iter().map(|q| [surface[q[0]], surface[q[1]], surface[q[2]], surface[q[3]]]),
+            );
         }
     }
     // Vessel-end stations: their wall nodes stay in the end planes.
@@ -376,7 +421,7 @@ pub fn build_volume(
         let ends = if i < pb.sections.len() / 2 { [pb.start, pb.end] } else { [pb.end, pb.start] };
         ends.iter().find_map(|e| match e {
             BranchEnd::Fold(f) => Some(f.junction),
-            BranchEnd::Vessel { .. } => None,
+            BranchEnd::Vessel { .. } | BranchEnd::Dome => None,
         })
     };
     let core_quads: Vec<Vec<[usize; 4]>> = templates.iter().map(|t| t.core_quads()).collect();
@@ -407,6 +452,18 @@ pub fn build_volume(
             }
             branch_of.resize(hexes.len(), b as u32);
             junction_of.resize(hexes.len(), interval_junction(pb, i));
+        }
+        if let Some(top) = &branch_nodes[b].dome_top {
+            for level in 0..r_cells {
+                for q in &core_quads[b] {
+                    if level == r_cells - 1 {
+                        add_face(sets::LUMEN_WALL_FACES, hexes.len(), FACE_OUTER);
+                    }
+                    hexes.push(top_hex(&top[level], &top[level + 1], q));
+                }
+            }
+            branch_of.resize(hexes.len(), b as u32);
+            junction_of.resize(hexes.len(), None);
         }
     }
     regions.resize(hexes.len(), Region::Lumen);
@@ -455,6 +512,29 @@ pub fn build_volume(
                         branch_of.push(b as u32);
                         junction_of.push(interval_junction(pb, i));
                     }
+                }
+            }
+            let Some(top) = &branch_nodes[b].dome_top else { continue };
+            let wall_level = |w: usize| -> Vec<u32> {
+                top[r_cells].iter().map(|&s| if w == 0 { s } else { wall_base[s as usize] + (w - 1) as u32 }).collect()
+            };
+            for (w, r) in levels.wall_regions.iter().enumerate() {
+                if *r != region {
+                    continue;
+                }
+                let (below, above) = (wall_level(w), wall_level(w + 1));
+                for q in &core_quads[b] {
+                    let e = hexes.len();
+                    if w == 0 {
+                        add_face(sets::WALL_LUMEN_FACES, e, FACE_INNER);
+                    }
+                    if w == w_cells - 1 {
+                        add_face(sets::WALL_OUTER_FACES, e, FACE_OUTER);
+                    }
+                    hexes.push(top_hex(&below, &above, q));
+                    regions.push(region);
+                    branch_of.push(b as u32);
+                    junction_of.push(None);
                 }
             }
         }
@@ -1084,6 +1164,7 @@ mod tests {
                     trim_outlet: 0.0,
                     normals_outward: true,
                     steep_short_branches: false,
+                    dome_end: false,
                 };
                 project_branch(&tree.branches[0], &Default::default(), b, &setup, None, None).unwrap()
             })

@@ -12,7 +12,7 @@ mod common;
 use common::*;
 use nalgebra::Point3;
 use std::time::Instant;
-use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions, Extraction};
+use vesselhex::centerline_extract::{extract_centerlines, EndKind, ExtractOptions, Extraction};
 use vesselhex::input::{clean_surface, read_centerlines, read_surface, topology, CenterlinePolyline, TriangleSurface};
 use vesselhex::surface::LumenSurface;
 
@@ -41,6 +41,11 @@ const SAME_SURFACE_REFERENCES: [&str; 3] =
 const MOST_DIFFERENT_DEPTH_RATIO: f64 = 1.01;
 
 /// The point of the polylines' segments closest to `p`.
+/// The cases with a saccular aneurysm beside the vessels whose sac is found as one (an end of
+/// kind sac): palabos_cerebral_aneurysm's sac holds the junction itself, and is not a pocket
+/// of the tree.
+const SACS: [&str; 1] = ["gmsh_cerebral_aneurysm"];
+
 fn closest_on_polylines(p: &Point3<f64>, lines: &[CenterlinePolyline]) -> Point3<f64> {
     let segment = |a: &Point3<f64>, b: &Point3<f64>| {
         let ab = b - a;
@@ -137,18 +142,25 @@ fn every_real_surface_gives_every_end_and_paths_inside_the_lumen() {
                 against_reference(&ex, &reference.polylines, &LumenSurface::new(&surface).unwrap());
         }
         let figure = |x: f64| if x.is_nan() { "-".to_string() } else { format!("{x:.3}") };
+        // A saccular aneurysm's sac is an end of the tree, not a vessel end.
+        let sacs = ex.ends.iter().filter(|e| e.kind == EndKind::Sac).count();
+        let vessel_ends = ex.ends.len() - sacs;
         println!(
-            "{:<34} {:>5} / {:<3} {:>8} {:>8} {:>8} {:>8} {seconds:>7.2}",
+            "{:<34} {:>5} / {:<3} {:>8} {:>8} {:>8} {:>8} {seconds:>7.2}{}",
             case.name,
-            ex.ends.len(),
+            vessel_ends,
             case.ends,
             format!("{in_lumen}/{interior}"),
             figure(median),
             figure(p95),
-            figure(depth_ratio)
+            figure(depth_ratio),
+            if sacs > 0 { format!("  + {sacs} sac") } else { String::new() }
         );
-        if ex.ends.len() < case.ends || ex.ends.len() > case.ends + 2 {
-            failures.push(format!("{}: {} ends found, {} true", case.name, ex.ends.len(), case.ends));
+        if vessel_ends < case.ends || vessel_ends > case.ends + 2 {
+            failures.push(format!("{}: {vessel_ends} vessel ends found, {} true", case.name, case.ends));
+        }
+        if sacs != usize::from(SACS.contains(&case.name.as_str())) {
+            failures.push(format!("{}: {sacs} sac(s) found", case.name));
         }
         if lines.len() + 1 != ex.ends.len() {
             failures.push(format!("{}: {} paths for {} ends", case.name, lines.len(), ex.ends.len()));

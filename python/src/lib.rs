@@ -164,6 +164,7 @@ fn extract_options(inlet: Option<[f64; 3]>, ends: Vec<[f64; 3]>, units: LengthUn
     ExtractOptions {
         inlet: inlet.map_or(InletChoice::Largest, |p| InletChoice::Nearest(mm(p))),
         ends: ends.into_iter().map(mm).collect(),
+        sacs: vec![],
     }
 }
 

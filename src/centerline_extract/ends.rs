@@ -17,6 +17,9 @@ pub enum EndKind {
     /// A rounded or blunt closed end, found as the far tip of a vessel the other ends' paths
     /// do not reach (see `rounded`).
     Dome,
+    /// The dome of a saccular aneurysm beside the vessels (see `rounded::sac_ends`): not a
+    /// vessel end, but meshed as a blind branch.
+    Sac,
     /// An end of centerlines given with the surface (nothing was looked for).
     Centerline,
 }
@@ -30,6 +33,7 @@ impl EndKind {
             EndKind::Cap { tag: None } => "flat cap",
             EndKind::Given => "given",
             EndKind::Dome => "dome",
+            EndKind::Sac => "sac",
             EndKind::Centerline => "centerline",
         }
     }
@@ -236,5 +240,9 @@ pub fn choose_inlet(ends: &[VesselEnd], choice: InletChoice) -> usize {
         InletChoice::Largest => -e.radius,
         InletChoice::Nearest(p) => (e.centre - p).norm(),
     };
-    (0..ends.len()).min_by(|&a, &b| key(&ends[a]).total_cmp(&key(&ends[b])).then(a.cmp(&b))).unwrap_or(0)
+    // A sac is no vessel end: the flow cannot enter there.
+    (0..ends.len())
+        .filter(|&e| ends[e].kind != EndKind::Sac)
+        .min_by(|&a, &b| key(&ends[a]).total_cmp(&key(&ends[b])).then(a.cmp(&b)))
+        .unwrap_or(0)
 }

@@ -101,11 +101,14 @@ pub struct ExtractOptions {
     pub inlet: InletChoice,
     /// Extra end points (rounded caps), snapped to the surface.
     pub ends: Vec<Point3<f64>>,
+    /// Points near the domes of saccular aneurysms the search does not take as sacs: ends of kind
+    /// [`EndKind::Sac`] (meshed as blind branches closed by a dome).
+    pub sacs: Vec<Point3<f64>>,
 }
 
 impl Default for ExtractOptions {
     fn default() -> Self {
-        ExtractOptions { inlet: InletChoice::Largest, ends: vec![] }
+        ExtractOptions { inlet: InletChoice::Largest, ends: vec![], sacs: vec![] }
     }
 }
 
@@ -129,9 +132,11 @@ pub struct Extraction {
 pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) -> Result<Extraction> {
     let mut notes = vec![];
     let mut search = EndSearch::new(surface, &mut notes)?;
-    search.add_given(&options.ends)?;
+    search.add_given(&options.ends, EndKind::Given)?;
+    search.add_given(&options.sacs, EndKind::Sac)?;
     search.add_rounded();
     search.add_blunt()?;
+    search.add_sacs();
     let EndSearch { graph, found, end_nodes, lumen, holes, .. } = search;
     if found.len() < 2 {
         return Err(Error::input(
@@ -234,15 +239,19 @@ impl EndSearch {
         Ok(EndSearch { graph, found, end_nodes, lumen, inward, holes, blunt, triangles, in_cap })
     }
 
-    /// The points given (`--ends`) that name no end found: the inscribed balls under them.
-    fn add_given(&mut self, points: &[Point3<f64>]) -> Result<()> {
+    /// The points given (`--ends`, or `--sacs` with `kind` sac) that name no end found: the
+    /// inscribed balls under them. A sac given where an end was found makes that end a sac.
+    fn add_given(&mut self, points: &[Point3<f64>], kind: EndKind) -> Result<()> {
         let (lo, hi) = self.lumen.bounding_box();
         for p in points {
-            if self.found.iter().any(|e| (e.centre - p).norm() < SAME_END * e.radius) {
+            if let Some(end) = self.found.iter_mut().find(|e| (e.centre - p).norm() < SAME_END * e.radius) {
+                if kind == EndKind::Sac {
+                    end.kind = kind;
+                }
                 continue;
             }
             let ball = given_end_ball(p, &self.lumen, &self.inward, (hi - lo).norm())?;
-            self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Given });
+            self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind });
             self.end_nodes.push(self.graph.add_end(ball));
         }
         Ok(())
@@ -255,6 +264,18 @@ impl EndSearch {
         for node in rounded::rounded_ends(&self.graph, &covered, self.end_nodes.is_empty(), beside_open_ends) {
             let ball = self.graph.nodes[node as usize];
             self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Dome });
+            self.end_nodes.push(node);
+        }
+    }
+
+    /// Saccular aneurysms: pockets beside the paths to every end that reach far beyond the
+    /// vessel they open from (see `rounded::sac_ends`). Each becomes an end of kind
+    /// [`EndKind::Sac`], meshed as a blind branch to its dome.
+    fn add_sacs(&mut self) {
+        let covered = paths_between(&self.graph, &self.end_nodes);
+        for node in rounded::sac_ends(&self.graph, &covered) {
+            let ball = self.graph.nodes[node as usize];
+            self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Sac });
             self.end_nodes.push(node);
         }
     }

@@ -544,3 +544,41 @@ pub fn check_mesh(case: &Path, extra: &[&str]) -> Vec<String> {
     }
     summary
 }
+
+/// Every face of every hex is shared by exactly two hexes, except the boundary faces, which
+/// are exactly the outer wall and the end faces; lumen and wall meet face to face.
+pub fn assert_conformal(name: &str, mesh: &VesselMesh) {
+    let mut count: std::collections::HashMap<[u32; 4], usize> = std::collections::HashMap::new();
+    for h in &mesh.hexes {
+        for f in 0..6 {
+            let mut q = vesselhex::mesh::face_nodes(h, f);
+            q.sort_unstable();
+            *count.entry(q).or_default() += 1;
+        }
+    }
+    assert!(count.values().all(|&c| c <= 2), "{name}: a face is shared by more than two hexes");
+    let boundary = count.values().filter(|&&c| c == 1).count();
+    let mut expected = mesh.face_sets[vesselhex::mesh::sets::WALL_OUTER_FACES].len();
+    for end in &mesh.ends {
+        expected += mesh.face_sets[&vesselhex::mesh::sets::lumen_end(&end.name)].len()
+            + mesh.face_sets[&vesselhex::mesh::sets::wall_end(&end.name)].len();
+    }
+    assert_eq!(boundary, expected, "{name}: boundary faces are not exactly the outer wall and the ends");
+    let key = |f: &vesselhex::mesh::ElementFace| {
+        let mut q = vesselhex::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
+        q.sort_unstable();
+        q
+    };
+    let mut lumen: Vec<[u32; 4]> = mesh.face_sets[vesselhex::mesh::sets::LUMEN_WALL_FACES].iter().map(key).collect();
+    let mut wall: Vec<[u32; 4]> = mesh.face_sets[vesselhex::mesh::sets::WALL_LUMEN_FACES].iter().map(key).collect();
+    lumen.sort_unstable();
+    wall.sort_unstable();
+    assert_eq!(lumen, wall, "{name}: the lumen and wall do not meet face to face");
+    // No duplicate nodes: conformity is by shared nodes, never by coincident ones.
+    let mut coords: Vec<[i64; 3]> =
+        mesh.nodes.iter().map(|p| [(p.x * 1e7) as i64, (p.y * 1e7) as i64, (p.z * 1e7) as i64]).collect();
+    coords.sort_unstable();
+    let before = coords.len();
+    coords.dedup();
+    assert_eq!(coords.len(), before, "{name}: coincident nodes");
+}

@@ -1,0 +1,67 @@
+//! A blind branch closed by a dome of hexes, as a saccular aneurysm's sac is meshed: a tube whose
+//! far end is a dome (hemispherical, flattened, elongated), its tip named as a sac.
+
+mod common;
+
+use common::assert_conformal;
+use vesselhex::config::{MeshConfig, Preset};
+use vesselhex::mesh::{is_sac, sets, Region};
+use vesselhex::pipeline::mesh_vessel;
+use vesselhex::progress::Progress;
+use vesselhex::surface::LumenSurface;
+use vesselhex::testing::{domed_tube_surface, straight_tube_centerline};
+
+const RADIUS: f64 = 2.0;
+const LENGTH: f64 = 20.0;
+
+#[test]
+fn a_sac_is_closed_by_a_valid_dome_that_reaches_its_tip() {
+    for (height, preset) in [(2.0, Preset::Coarse), (2.0, Preset::Medium), (1.0, Preset::Coarse), (3.2, Preset::Coarse)]
+    {
+        let name = format!("dome {height} mm high, {preset:?}");
+        let surface = domed_tube_surface(RADIUS, LENGTH, height);
+        // The centerline ends at the dome's centre, where a sac's medial axis ends.
+        let centerlines = straight_tube_centerline(RADIUS, LENGTH);
+        let mut config = MeshConfig::preset(preset);
+        config.centerline.sacs_mm = vec![[0.0, 0.0, LENGTH]];
+        let m = mesh_vessel(&surface, &centerlines, &config, &mut Progress::new(true, 9))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mesh = &m.mesh;
+        // One end, the inlet: the sac is no outlet, and its branch is named for it.
+        assert_eq!(mesh.ends.len(), 1, "{name}");
+        assert!(mesh.ends[0].is_inlet, "{name}");
+        assert!(mesh.branch_names.len() == 1 && is_sac(&mesh.branch_names[0]), "{name}: {:?}", mesh.branch_names);
+        // Valid, well-shaped hexes all through the dome.
+        let min_sj = mesh.quality.iter().map(|q| q.scaled_jacobian).fold(f64::INFINITY, f64::min);
+        assert!(min_sj > 0.4, "{name}: minimum scaled Jacobian {min_sj:.3}");
+        // Closed: the only boundary faces are the outer wall and the inlet's.
+        assert_conformal(&name, mesh);
+        // Every interface node on the surface, and the dome's top at the tip.
+        let lumen = LumenSurface::new(&surface).unwrap();
+        let interface = &mesh.node_sets[sets::INTERFACE_NODES];
+        let off = interface.iter().map(|&n| lumen.closest(&mesh.nodes[n as usize]).distance).fold(0.0, f64::max);
+        assert!(off < 1e-9, "{name}: an interface node {off:.2e} mm off the surface");
+        let top = interface.iter().map(|&n| mesh.nodes[n as usize].z).fold(f64::NEG_INFINITY, f64::max);
+        assert!((top - (LENGTH + height)).abs() < 1e-6, "{name}: the dome's top at z = {top:.6}");
+        // The wall covers the dome: as many wall elements per layer cell as lumen-surface faces.
+        let wall_cells: usize = mesh.layers.iter().map(|l| l.radial_elements).sum();
+        assert_eq!(
+            mesh.count(Region::Intima) + mesh.count(Region::Media) + mesh.count(Region::Adventitia),
+            wall_cells * mesh.face_sets[sets::LUMEN_WALL_FACES].len(),
+            "{name}"
+        );
+        // Right-handed orthonormal triads, the radial direction leaving the lumen on the dome.
+        for e in mesh.wall_range() {
+            let t = &mesh.triads[e];
+            assert!((t.e_circ.cross(&t.e_long) - t.e_rad).norm() < 1e-9, "{name}: element {e}");
+            let c = mesh.corners(e);
+            let centre = c.iter().fold(nalgebra::Vector3::zeros(), |a, p| a + p.coords) / 8.0;
+            let out = if centre.z > LENGTH {
+                centre - nalgebra::Vector3::new(0.0, 0.0, LENGTH)
+            } else {
+                nalgebra::Vector3::new(centre.x, centre.y, 0.0)
+            };
+            assert!(t.e_rad.dot(&out.normalize()) > 0.5, "{name}: element {e}'s radial direction points inward");
+        }
+    }
+}
