@@ -144,6 +144,10 @@ pub struct CenterlineTree {
     /// Per branch, the skeleton edge it was built from (the same on every build from the same
     /// file and settings), to name a branch to [`CenterlineTree::build_merging`].
     pub(crate) segments: Vec<usize>,
+    /// The skeleton edges whose far junction was merged into the upstream one because it lay
+    /// close (see `CenterlineConfig::junction_merge_radii`), the merged junction kept at the
+    /// upstream centre; [`CenterlineTree::build_merging`] can centre it along them instead.
+    pub(crate) close_merges: Vec<usize>,
 }
 
 impl CenterlineTree {
@@ -191,7 +195,12 @@ impl CenterlineTree {
             }
             let samples = build_samples(&line, config, FirstFrame::Hint, false)?;
             let branch = Branch::lone(samples);
-            return Ok(CenterlineTree { branches: vec![branch], junctions: vec![], segments: vec![0] });
+            return Ok(CenterlineTree {
+                branches: vec![branch],
+                junctions: vec![],
+                segments: vec![0],
+                close_merges: vec![],
+            });
         }
         let tags: Vec<_> = centerlines.polylines.iter().map(|l| l.cell_tags.clone()).collect();
         let skeleton = Skeleton::from_lines(lines, &tags, path)?;
@@ -414,7 +423,12 @@ fn assemble(rooted: &RootedTree, config: &CenterlineConfig) -> Result<Centerline
             end_junction,
         });
     }
-    Ok(CenterlineTree { branches, junctions, segments: rooted.order.clone() })
+    Ok(CenterlineTree {
+        branches,
+        junctions,
+        segments: rooted.order.clone(),
+        close_merges: rooted.close_merges.clone(),
+    })
 }
 
 /// How a branch's first frame is found.

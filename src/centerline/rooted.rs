@@ -25,6 +25,9 @@ pub(crate) struct RootedTree {
     /// Nodes placed where two daughters sharing a trunk part ([`split_shared_trunks`]): on the
     /// medial axis by construction, so they are not moved to a larger ball.
     pub parted: Vec<bool>,
+    /// The segments whose far junction was merged because it lay close (not forced), each kept
+    /// at the upstream junction's centre.
+    pub close_merges: Vec<usize>,
 }
 
 /// A junction merged into its upstream neighbour whatever their distance: the one at the end of
@@ -134,12 +137,14 @@ pub(crate) fn hang(
     }
 
     // Merge junctions into the upstream one when their centres are close.
+    let mut close_merges = vec![];
     for &j in &bfs {
         if children[j].len() < 2 {
             continue;
         }
         let reach = merge_radii * nodes[j].radius;
         let mut recentre: Option<(usize, f64)> = None;
+        let degenerate = DEGENERATE_SEGMENT * nodes[j].radius;
         loop {
             let close = children[j].iter().position(|&e| {
                 let k = edges[e].ends[1];
@@ -151,6 +156,9 @@ pub(crate) fn hang(
             let Some(at) = close else { break };
             let e = children[j][at];
             let k = edges[e].ends[1];
+            if !forced.iter().any(|f| f.segment == e) && edges[e].line.length() >= degenerate {
+                close_merges.push(e);
+            }
             let absorbed = std::mem::take(&mut children[k]);
             for &f in &absorbed {
                 let mut line = edges[e].line.clone();
@@ -190,7 +198,7 @@ pub(crate) fn hang(
         next += 1;
         order.extend(children[edges[e].ends[1]].iter().copied());
     }
-    Ok(RootedTree { nodes, edges, children, parent, order, parted })
+    Ok(RootedTree { nodes, edges, children, parent, order, parted, close_merges })
 }
 
 /// Moves a merged junction `node` onto the segment it absorbed, the fraction `at` of its length
