@@ -3,10 +3,13 @@
 
 mod common;
 
-use common::assert_conformal;
+use common::{
+    assert_conformal, assert_lumen_opens, ccx_available, frd_displacements, lumen_normal_motion, solve_calculix,
+    temp_dir,
+};
 use vesselhex::config::{MeshConfig, Preset};
 use vesselhex::mesh::{is_sac, sets, Region};
-use vesselhex::pipeline::mesh_vessel;
+use vesselhex::pipeline::{mesh_vessel, Meshed};
 use vesselhex::progress::Progress;
 use vesselhex::surface::LumenSurface;
 use vesselhex::testing::{domed_tube_surface, straight_tube_centerline};
@@ -14,18 +17,24 @@ use vesselhex::testing::{domed_tube_surface, straight_tube_centerline};
 const RADIUS: f64 = 2.0;
 const LENGTH: f64 = 20.0;
 
+/// The domed tube meshed with its tip named as a sac.
+fn domed_tube(height: f64, preset: Preset) -> Meshed {
+    let surface = domed_tube_surface(RADIUS, LENGTH, height);
+    // The centerline ends at the dome's centre, where a sac's medial axis ends.
+    let centerlines = straight_tube_centerline(RADIUS, LENGTH);
+    let mut config = MeshConfig::preset(preset);
+    config.centerline.sacs_mm = vec![[0.0, 0.0, LENGTH]];
+    mesh_vessel(&surface, &centerlines, &config, &mut Progress::new(true, 9))
+        .unwrap_or_else(|e| panic!("dome {height} mm high, {preset:?}: {e}"))
+}
+
 #[test]
 fn a_sac_is_closed_by_a_valid_dome_that_reaches_its_tip() {
     for (height, preset) in [(2.0, Preset::Coarse), (2.0, Preset::Medium), (1.0, Preset::Coarse), (3.2, Preset::Coarse)]
     {
         let name = format!("dome {height} mm high, {preset:?}");
         let surface = domed_tube_surface(RADIUS, LENGTH, height);
-        // The centerline ends at the dome's centre, where a sac's medial axis ends.
-        let centerlines = straight_tube_centerline(RADIUS, LENGTH);
-        let mut config = MeshConfig::preset(preset);
-        config.centerline.sacs_mm = vec![[0.0, 0.0, LENGTH]];
-        let m = mesh_vessel(&surface, &centerlines, &config, &mut Progress::new(true, 9))
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let m = domed_tube(height, preset);
         let mesh = &m.mesh;
         // One end, the inlet: the sac is no outlet, and its branch is named for it.
         assert_eq!(mesh.ends.len(), 1, "{name}");
@@ -64,4 +73,28 @@ fn a_sac_is_closed_by_a_valid_dome_that_reaches_its_tip() {
             assert!(t.e_rad.dot(&out.normalize()) > 0.5, "{name}: element {e}'s radial direction points inward");
         }
     }
+}
+
+/// CalculiX solves the domed wall under lumen pressure: every branch opens, and every
+/// lumen-surface node of the dome moves out.
+#[test]
+fn calculix_inflates_a_domed_sac() {
+    let m = domed_tube(2.0, Preset::Coarse);
+    let mesh = &m.mesh;
+    if ccx_available() {
+        let run = solve_calculix(mesh, &Default::default(), "sac");
+        let disp = frd_displacements(&run.dir);
+        assert_lumen_opens("domed tube", mesh, &disp);
+        let on_dome: Vec<(u32, f64)> =
+            lumen_normal_motion(mesh, &disp).into_iter().filter(|(n, _)| mesh.nodes[*n as usize].z > LENGTH).collect();
+        assert!(!on_dome.is_empty());
+        let inward: Vec<_> = on_dome.iter().filter(|m| m.1 <= 0.0).collect();
+        assert!(inward.is_empty(), "{} of {} dome nodes move inwards: {inward:?}", inward.len(), on_dome.len());
+    }
+    // A vessel whose only other end is its sac has no way out for the flow: the CFD writer says
+    // so (the cohort's saccular aneurysm, with outlets, goes through checkMesh in cohort_meshing).
+    let dir = temp_dir("sac-openfoam");
+    let refused = vesselhex::writers::openfoam::write_openfoam(mesh, &Default::default(), &dir).unwrap_err();
+    assert!(refused.to_string().contains("no outlet"), "{refused}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
