@@ -1257,12 +1257,44 @@ pub fn mesh_surface(
     crate::finishing::scale_estimate(&mut estimate, config);
     crate::resources::check_fits(&estimate, settings.max_memory, &centerline_source)?;
     let tree_config = keep_extracted_ends(config, found_ends.as_ref());
-    let mut meshed =
-        mesh_vessel(&surface, &centerlines, &tree_config, progress).map_err(|e| name_winding(e, &surface))?;
+    let (mut meshed, centerlines) = match mesh_vessel(&surface, &centerlines, &tree_config, progress) {
+        Ok(meshed) => (meshed, centerlines),
+        // Sacs found on the surface never cost the vessel: refused with them, it is meshed
+        // without them, and each is said not meshed (a warning, report.json's ends, exit 3).
+        Err(e) if found_ends.is_some() && !tree_config.centerline.sacs_mm.is_empty() => {
+            let sacs = &tree_config.centerline.sacs_mm;
+            settings.warnings.push(Warning::new(
+                "sac_not_meshed",
+                format!("the vessel is meshed without its sac(s); with them: {e}"),
+            ));
+            let centerlines = without_paths_to(&centerlines, sacs);
+            let config = MeshConfig {
+                centerline: crate::config::CenterlineConfig { sacs_mm: vec![], ..tree_config.centerline.clone() },
+                ..tree_config.clone()
+            };
+            let meshed =
+                mesh_vessel(&surface, &centerlines, &config, progress).map_err(|e| name_winding(e, &surface))?;
+            (meshed, centerlines)
+        }
+        Err(e) => return Err(name_winding(e, &surface)),
+    };
     let limits = ReadLimits::within(settings.max_memory);
     let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress)?;
     let (ends, inlet) = found_ends.unwrap_or_else(|| tree_ends(&meshed.tree));
     Ok(MeshedVessel { meshed, surface, centerline_source, centerlines, ends, inlet, hygiene, additions, settings })
+}
+
+/// The centerlines without the paths to `points`: for each point, the polyline whose last point
+/// lies nearest it (the extraction's paths end at their ends' centres).
+fn without_paths_to(centerlines: &Centerlines, points: &[[f64; 3]]) -> Centerlines {
+    let lines = &centerlines.polylines;
+    let gap = |k: usize, p: &[f64; 3]| lines[k].points.last().map_or(f64::INFINITY, |q| (q - Point3::from(*p)).norm());
+    let dropped: Vec<usize> =
+        points.iter().filter_map(|p| (0..lines.len()).min_by(|&a, &b| gap(a, p).total_cmp(&gap(b, p)))).collect();
+    Centerlines {
+        polylines: (0..lines.len()).filter(|k| !dropped.contains(k)).map(|k| lines[k].clone()).collect(),
+        source: centerlines.source.clone(),
+    }
 }
 
 /// `config` with the inlet the centerline extraction chose (the largest end section, or the end

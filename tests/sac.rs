@@ -14,6 +14,35 @@ use vesselhex::progress::Progress;
 use vesselhex::surface::LumenSurface;
 use vesselhex::testing::{domed_tube_surface, straight_tube_centerline};
 
+/// The vessel meshed without a sac that cannot be closed: a Y bifurcation with one open end
+/// named a sac (no dome closes an open end) is meshed with its other two branches, and the sac
+/// is said not meshed: a warning with the cause, report.json's ends, exit code 3.
+#[test]
+fn a_sac_that_cannot_be_closed_leaves_the_rest_meshed_and_is_said() {
+    let out = temp_dir("sac-open-end");
+    let surface = common::fixtures_dir().join("y_bifurcation.stl");
+    let o = common::vesselhex(&[
+        "mesh",
+        "--surface",
+        common::path_str(&surface),
+        "--sacs",
+        "7.571,0,13.114",
+        "--output",
+        common::path_str(&out),
+        "--quiet",
+    ]);
+    assert_eq!(o.status.code(), Some(3), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let warned = |kind: &str| report["warnings"].as_array().unwrap().iter().any(|w| w["kind"] == kind);
+    assert!(warned("sac_not_meshed") && warned("end_not_meshed"), "{}", report["warnings"]);
+    let ends = report["ends"].as_array().unwrap();
+    let unmeshed: Vec<_> = ends.iter().filter(|e| e["meshed"] == false).collect();
+    assert!(unmeshed.len() == 1 && unmeshed[0]["kind"] == "sac", "{ends:?}");
+    assert_eq!(report["branches"].as_array().unwrap().len(), 1);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 const RADIUS: f64 = 2.0;
 const LENGTH: f64 = 20.0;
 
