@@ -18,7 +18,7 @@ use nalgebra::{Point3, Vector2, Vector3};
 use rayon::prelude::*;
 
 mod dome;
-pub use dome::{dome_layers, DomeTop};
+pub use dome::DomeTop;
 
 /// Hit triangles whose normal is within this cosine of the axis mark a cap (about 70 degrees
 /// from the wall direction of a tube) ...

@@ -260,6 +260,7 @@ class Mesh:
         hexes: ``(m, 8)`` int64 node indices, VTK's hexahedron corner order.
         region: ``(m,)`` int32, 0 lumen, 1 intima, 2 media, 3 adventitia (see :data:`REGIONS`).
         branch: ``(m,)`` int32 branch index (0 for an unbranched vessel; see ``branch_names``).
+        sac: ``(m,)`` int32, 1 where the element lies in a saccular aneurysm's sac, else 0.
         triads: ``(m, 3, 3)`` float64: ``e_long``, ``e_circ``, ``e_rad`` of each element.
         fibres: ``(m, 2, 3)`` float64: the two collagen fibre directions (zero in the lumen).
         scaled_jacobian: ``(m,)`` float64, Verdict's definition (1 for a cube).
@@ -277,6 +278,7 @@ class Mesh:
         self.hexes: np.ndarray = native.hexes
         self.region: np.ndarray = native.region
         self.branch: np.ndarray = native.branch
+        self.sac: np.ndarray = native.sac
         self.triads: np.ndarray = native.triads
         self.fibres: np.ndarray = native.fibres
         self.scaled_jacobian: np.ndarray = native.scaled_jacobian
@@ -308,6 +310,7 @@ class Mesh:
         return {
             "region": self.region,
             "branch": self.branch,
+            "sac": self.sac,
             "scaled_jacobian": self.scaled_jacobian,
             "equiangle_skew": self.equiangle_skew,
             "e_long": self.e_long,

@@ -21,6 +21,7 @@ class Mesh:
     hexes: npt.NDArray[np.int64]
     region: npt.NDArray[np.int32]
     branch: npt.NDArray[np.int32]
+    sac: npt.NDArray[np.int32]
     scaled_jacobian: npt.NDArray[np.float64]
     equiangle_skew: npt.NDArray[np.float64]
     triads: npt.NDArray[np.float64]

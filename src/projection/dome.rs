@@ -37,7 +37,7 @@ pub struct DomeTop {
 
 /// The box's layers beyond the last section, for a core of nx x ny: about half the core's
 /// elements across, so the box's cells are about cubes.
-pub fn dome_layers(template: &SectionTemplate) -> usize {
+fn dome_layers(template: &SectionTemplate) -> usize {
     ((template.nx + template.ny) / 4).max(1)
 }
 
