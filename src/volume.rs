@@ -6,21 +6,26 @@
 //! shared with the wall), then the wall levels. Ring level 0 is the core boundary. Elements are
 //! ordered lumen, intima, media, adventitia, each station interval by station interval.
 
+mod elements;
+mod numbering;
+
 use crate::blocks::SectionTemplate;
 use crate::config::WallGrowth;
-use crate::junction::{FoldKey, JunctionGeometry};
-use crate::mesh::{
-    sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, WallLayer, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER,
-    FACE_UPSTREAM, HEX_EDGES,
-};
+use crate::junction::JunctionGeometry;
+use crate::mesh::{sets, Hex, Region, VesselMesh, WallLayer, HEX_EDGES};
 use crate::node_optimisation::{optimise_nodes, Freedom, PYRAMID_TARGET};
-use crate::projection::{BranchEnd, ProjectedBranch};
+use crate::projection::ProjectedBranch;
 use crate::quality::Validity;
 use crate::surface::LumenSurface;
 use crate::surface_smoothing::{smooth_on_surface, RayNode, SmoothedNode};
 use crate::wall_directions::{surface_normals, SurfaceGraph, JUNCTION_SMOOTHING_PASSES};
+use elements::{
+    add_lumen_elements, add_wall_elements, lumen_surface_quads, vessel_end_names, vessel_end_sets, vessel_end_tangents,
+    Elements,
+};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
+use numbering::{place_lumen_nodes, LumenNodes, Numbering};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::HashMap;
@@ -59,17 +64,6 @@ impl RadialLevels {
     }
 }
 
-/// Node numbering of one branch: for each station, its core nodes then its lumen ring levels
-/// 1..=R (level R is the lumen surface). Ring level 0 is the core boundary.
-struct BranchNodes {
-    /// Per station: (N+1)^2 core ids then R * ring ids.
-    stations: Vec<Vec<u32>>,
-    /// A dome's top grid (see [`crate::projection::DomeTop`]): per lumen level 0..=R, the ids of
-    /// the core grid's nodes; level 0 is the last station's core, the boundary of level l its
-    /// ring level l.
-    dome_top: Option<Vec<Vec<u32>>>,
-}
-
 /// What the volume is built from: the projected branches and the settings of the mesh.
 pub struct VolumeInputs<'a> {
     pub projected: &'a [ProjectedBranch],
@@ -88,7 +82,7 @@ pub struct VolumeInputs<'a> {
 /// unbranched vessel). Triads, fibres and quality are filled in by [`crate::annotate`].
 ///
 /// Nodes of a folded end section are shared between the branches of a junction through their
-/// [`FoldKey`]; the wall grows from the lumen-surface nodes once per node, so the junction's
+/// [`crate::junction::FoldKey`]; the wall grows from the lumen-surface nodes once per node, so the junction's
 /// lumen and wall are conformal by construction.
 ///
 /// The junction optimisation moves lumen nodes only, so one optimised lumen carries every wall
@@ -100,501 +94,61 @@ pub fn build_volume(
     optimisation: JunctionOptimisation,
     junction_walls: &[JunctionWall],
 ) -> (Vec<VesselMesh>, Vec<Option<usize>>) {
-    let VolumeInputs {
-        projected,
-        templates,
-        junctions,
-        levels,
-        layers,
-        wall_thickness,
-        wall_growth,
-        branch_names,
-        surface,
-    } = *inputs;
+    let VolumeInputs { projected, templates, junctions, levels, layers, surface, .. } = *inputs;
     assert!(!junction_walls.is_empty(), "at least one wall is asked for");
     assert_eq!(templates.len(), projected.len(), "one template per branch");
-    // Ring length of each branch.
-    let ring_len = |b: usize| templates[b].ring_len();
     let r_cells = levels.lumen_cells();
-    let w_cells = levels.wall_cells();
 
-    // Lumen nodes, branch by branch and station by station; folded sections through the pool.
-    let mut nodes: Vec<Point3<f64>> = Vec::new();
-    let mut pool: HashMap<FoldKey, u32> = HashMap::new();
-    // Per node: the section radius and ray direction it was placed with (surface nodes only).
-    let mut node_radius: Vec<f64> = Vec::new();
-    // Nodes of junction sections, whose wall directions get extra smoothing.
-    let mut junction_node: Vec<bool> = Vec::new();
-    let mut node_ray: Vec<Vector3<f64>> = Vec::new();
-    // How each node may move in the junction optimisation.
-    let mut movable: Vec<Freedom> = Vec::new();
-    // How each node may move when it is near a poor element (see `improve_poor`).
-    let mut poor_mobility: Vec<Freedom> = Vec::new();
-    let mut branch_nodes: Vec<BranchNodes> = Vec::with_capacity(projected.len());
-    // The transitions' surface nodes (the pages' rims too), each with its ray's ring nodes.
-    let mut smoothed_columns: IndexMap<u32, Vec<RayNode>> = IndexMap::new();
-    for (pb, template) in projected.iter().zip(templates) {
-        let (nx, m, core_count) = (template.nx, template.ring_len(), template.core_len());
-        let last = pb.sections.len() - 1;
-        let mut stations = Vec::with_capacity(pb.sections.len());
-        for (i, sec) in pb.sections.iter().enumerate() {
-            let fold = match (i, pb.start, pb.end) {
-                (0, BranchEnd::Fold(f), _) => Some(f),
-                (i, _, BranchEnd::Fold(f)) if i == last => Some(f),
-                _ => None,
-            };
-            let mut ids = Vec::with_capacity(core_count + r_cells * m);
-            // A folded section's nodes are the pages' (pooled: one node whichever slot adds it,
-            // with the same mobility), so moving them keeps the junction conformal.
-            let inner_movable = sec.in_junction && (fold.is_none() || optimisation.move_pages);
-            // A vessel end's section stays as it is (its nodes are the end's sets and plane).
-            let vessel_end = (i == 0 && matches!(pb.start, BranchEnd::Vessel { .. }))
-                || (i == last && matches!(pb.end, BranchEnd::Vessel { .. }));
-            let surface_movable = optimisation.slide_surface_nodes && inner_movable && !vessel_end;
-            let in_junction = sec.in_junction;
-            let (poor_inner, poor_surface) =
-                if vessel_end { (Freedom::Fixed, Freedom::Fixed) } else { (Freedom::Free, Freedom::OnSurface) };
-            let mut add = |key: Option<FoldKey>,
-                           p: Point3<f64>,
-                           radius: f64,
-                           ray: Vector3<f64>,
-                           free: Freedom,
-                           poor: Freedom|
-             -> u32 {
-                if let Some(key) = key {
-                    if let Some(&id) = pool.get(&key) {
-                        return id;
-                    }
-                }
-                let id = nodes.len() as u32;
-                nodes.push(p);
-                node_radius.push(radius);
-                junction_node.push(in_junction);
-                node_ray.push(ray);
-                movable.push(free);
-                poor_mobility.push(poor);
-                if let Some(key) = key {
-                    pool.insert(key, id);
-                }
-                id
-            };
-            let key = |c: usize, level: usize| {
-                fold.map(|f| FoldKey::new(&junctions[f.junction], &f, template, c % (nx + 1), c / (nx + 1), level))
-            };
-            for (c, p) in sec.core.iter().enumerate() {
-                let free = if inner_movable { Freedom::Free } else { Freedom::Fixed };
-                ids.push(add(key(c, 0), *p, sec.station.radius, Vector3::zeros(), free, poor_inner));
-            }
-            for (level, &rho) in levels.lumen.iter().enumerate().skip(1) {
-                for k in 0..m {
-                    let (a, b) = (sec.origins[k], sec.surface[k]);
-                    // The surface level is the hit point itself, bit for bit.
-                    let p = if rho == 1.0 { b } else { a + (b - a) * rho };
-                    let free = if inner_movable && level < r_cells {
-                        Freedom::Free
-                    } else if surface_movable && level == r_cells {
-                        Freedom::OnSurface
-                    } else {
-                        Freedom::Fixed
-                    };
-                    let poor = if level < r_cells { poor_inner } else { poor_surface };
-                    ids.push(add(
-                        key(template.ring_core_index[k], level),
-                        p,
-                        sec.station.radius,
-                        sec.dirs[k],
-                        free,
-                        poor,
-                    ));
-                }
-            }
-            if in_junction && !vessel_end {
-                add_columns(&mut smoothed_columns, &ids, template, sec, levels);
-            }
-            stations.push(ids);
-        }
-        // A dome's top: new nodes on the top rays, the last station's where they meet it.
-        let dome_top = pb.dome.as_ref().map(|dome| {
-            let last = &stations[stations.len() - 1];
-            let mut ring_point = vec![None; core_count];
-            for (k, &c) in template.ring_core_index.iter().enumerate() {
-                ring_point[c] = Some(k);
-            }
-            let radius = pb.sections[pb.sections.len() - 1].station.radius;
-            let mut top = vec![last[..core_count].to_vec()];
-            for (level, &rho) in levels.lumen.iter().enumerate().skip(1) {
-                let mut ids = Vec::with_capacity(core_count);
-                for (c, k) in ring_point.iter().enumerate() {
-                    if let Some(k) = k {
-                        ids.push(last[core_count + (level - 1) * m + k]);
-                        continue;
-                    }
-                    let (a, b) = (dome.origins[c], dome.surface[c]);
-                    ids.push(nodes.len() as u32);
-                    nodes.push(if rho == 1.0 { b } else { a + (b - a) * rho });
-                    node_radius.push(radius);
-                    junction_node.push(false);
-                    node_ray.push(dome.dirs[c]);
-                    movable.push(Freedom::Fixed);
-                    poor_mobility.push(if level < r_cells { Freedom::Free } else { Freedom::OnSurface });
-                }
-                top.push(ids);
-            }
-            top
-        });
-        branch_nodes.push(BranchNodes { stations, dome_top });
-    }
-    // A hex of a dome's top between two of its levels over core quad `q`, in the canonical order
-    // (radial = from `below` to `above`, circumferential along the quad's first edge, axial
-    // along its last: on the top, the radial direction is the tangent's, and t x n = b).
-    let top_hex = |below: &[u32], above: &[u32], q: &[usize; 4]| -> Hex {
-        [below[q[0]], above[q[0]], above[q[1]], below[q[1]], below[q[3]], above[q[3]], above[q[2]], below[q[2]]]
-    };
-    let lumen_ring = |b: usize, i: usize, level: usize, k: usize| -> u32 {
-        let st = &branch_nodes[b].stations[i];
-        let template = &templates[b];
-        let m = template.ring_len();
-        let k = k % m;
-        if level == 0 {
-            st[template.ring_core_index[k]]
-        } else {
-            st[template.core_len() + (level - 1) * m + k]
-        }
-    };
-
-    // The lumen surface as quads, each wound so that its normal leaves the lumen: circumferential
-    // x axial, the ring running counter-clockwise about each branch's flow direction.
-    let mut quads: Vec<[u32; 4]> = Vec::new();
-    for (b, pb) in projected.iter().enumerate() {
-        for i in 0..pb.sections.len() - 1 {
-            for k in 0..ring_len(b) {
-                quads.push([
-                    lumen_ring(b, i, r_cells, k),
-                    lumen_ring(b, i, r_cells, k + 1),
-                    lumen_ring(b, i + 1, r_cells, k + 1),
-                    lumen_ring(b, i + 1, r_cells, k),
-                ]);
-            }
-        }
-        if let Some(top) = &branch_nodes[b].dome_top {
-            let surface = &top[r_cells];
-            quads.extend(
-                templates[b].core_quads().iter().map(|q| [surface[q[0]], surface[q[1]], surface[q[2]], surface[q[3]]]),
-            );
-        }
-    }
-    // Vessel-end stations: their wall nodes stay in the end planes.
-    let mut end_tangent: HashMap<u32, Vector3<f64>> = HashMap::new();
-    for (b, pb) in projected.iter().enumerate() {
-        let last = pb.sections.len() - 1;
-        for (i, is_end) in
-            [(0, matches!(pb.start, BranchEnd::Vessel { .. })), (last, matches!(pb.end, BranchEnd::Vessel { .. }))]
-        {
-            if is_end {
-                for k in 0..ring_len(b) {
-                    end_tangent.insert(lumen_ring(b, i, r_cells, k), pb.sections[i].station.frame.tangent);
-                }
-            }
-        }
-    }
-    // Wall nodes: W levels above every lumen-surface node, in surface-node order.
-    let graph = SurfaceGraph::new(&quads, nodes.len());
+    let (lumen, branch_nodes) = place_lumen_nodes(projected, templates, junctions, levels, &optimisation);
+    let mut numbering = Numbering::new(&branch_nodes, templates, levels);
+    let quads = lumen_surface_quads(projected, &numbering, r_cells);
+    let graph = SurfaceGraph::new(&quads, lumen.nodes.len());
+    let LumenNodes { mut nodes, radius, in_junction, ray, movable, poor_mobility, smoothed_columns, .. } = lumen;
     if optimisation.smooth_surface {
-        // In node order, so the Gauss-Seidel passes do not depend on the branches' order.
-        smoothed_columns.sort_keys();
-        let smoothed: Vec<SmoothedNode> = smoothed_columns
-            .into_iter()
-            .map(|(node, column)| {
-                let around = &graph.neighbours[graph.position[node as usize]];
-                SmoothedNode { node, neighbours: around.iter().map(|&j| graph.nodes[j]).collect(), column }
-            })
-            .collect();
-        smooth_on_surface(&mut nodes, &smoothed, surface);
+        smooth_transition_surface(&mut nodes, smoothed_columns, &graph, surface);
     }
-    let surface_nodes = &graph.nodes;
-    let nominal: Vec<f64> = surface_nodes.iter().map(|&s| wall_thickness(node_radius[s as usize])).collect();
-    // Growth direction and thickness at every surface node, from the surface as it stands.
-    let growth = |nodes: &[Point3<f64>], junction_wall: JunctionWall| -> (Vec<Vector3<f64>>, Vec<f64>) {
-        let dirs: Vec<Vector3<f64>> = match wall_growth {
-            WallGrowth::Ray => graph.nodes.iter().map(|&s| node_ray[s as usize]).collect(),
-            WallGrowth::Normal => {
-                let junction_passes = match junction_wall {
-                    JunctionWall::Normal => 0,
-                    _ => JUNCTION_SMOOTHING_PASSES,
-                };
-                let mut dirs = surface_normals(
-                    nodes,
-                    &quads,
-                    &graph,
-                    &node_ray,
-                    &end_tangent,
-                    &junction_node,
-                    junction_passes,
-                    &nominal,
-                );
-                // Along the rays in junction transitions, where asked: the caller keeps whichever
-                // wall is better (see `build_volume`'s caller).
-                if junction_wall == JunctionWall::Ray {
-                    for (d, &s) in dirs.iter_mut().zip(&graph.nodes) {
-                        if junction_node[s as usize] && !end_tangent.contains_key(&s) {
-                            *d = node_ray[s as usize].normalize();
-                        }
-                    }
-                }
-                dirs
-            }
-        };
-        let thickness = crotch_limited_thickness(nodes, &graph, &dirs, surface, &nominal, !junctions.is_empty());
-        (dirs, thickness)
-    };
-    // Their ids now; their places once the junction optimisation has settled the surface.
-    let mut wall_base = vec![u32::MAX; nodes.len()];
-    for &s in surface_nodes {
-        wall_base[s as usize] = nodes.len() as u32;
-        let p = nodes[s as usize];
-        nodes.extend(levels.wall[1..].iter().map(|_| p));
-    }
-    let ring = |b: usize, i: usize, level: usize, k: usize| -> u32 {
-        if level <= r_cells {
-            lumen_ring(b, i, level, k)
-        } else {
-            wall_base[lumen_ring(b, i, r_cells, k) as usize] + (level - r_cells - 1) as u32
-        }
-    };
-    // Hex between stations i, i+1, ring levels level, level+1 and ring points k, k+1; canonical
-    // order: radial x circumferential = axial, so the Jacobian is positive.
-    let ring_hex = |b: usize, i: usize, level: usize, k: usize| -> Hex {
-        [
-            ring(b, i, level, k),
-            ring(b, i, level + 1, k),
-            ring(b, i, level + 1, k + 1),
-            ring(b, i, level, k + 1),
-            ring(b, i + 1, level, k),
-            ring(b, i + 1, level + 1, k),
-            ring(b, i + 1, level + 1, k + 1),
-            ring(b, i + 1, level, k + 1),
-        ]
+    // The wall nodes' ids now; their places once the junction optimisation has settled the surface.
+    numbering.add_wall_nodes(&mut nodes, &graph.nodes, levels);
+    let wall = WallLayout {
+        inputs,
+        quads: &quads,
+        graph: &graph,
+        ray: &ray,
+        in_junction: &in_junction,
+        end_tangent: vessel_end_tangents(projected, &numbering, r_cells),
+        nominal: graph.nodes.iter().map(|&s| (inputs.wall_thickness)(radius[s as usize])).collect(),
+        numbering: &numbering,
     };
 
-    // Vessel ends: the inlet, then the outlets in branch order.
-    let outlets = projected.iter().filter(|p| matches!(p.end, BranchEnd::Vessel { .. })).count();
-    let mut end_names: Vec<(usize, bool, String)> = Vec::new(); // (branch, is_inlet, name)
-    let mut outlet_no = 0;
-    for (b, pb) in projected.iter().enumerate() {
-        if matches!(pb.start, BranchEnd::Vessel { .. }) {
-            end_names.push((b, true, "inlet".to_string()));
-        }
-        if matches!(pb.end, BranchEnd::Vessel { .. }) {
-            outlet_no += 1;
-            let name = if outlets == 1 { "outlet".to_string() } else { format!("outlet_{outlet_no}") };
-            end_names.push((b, false, name));
-        }
-    }
-    let end_name = |b: usize, inlet: bool| -> Option<&str> {
-        end_names.iter().find(|e| e.0 == b && e.1 == inlet).map(|e| e.2.as_str())
-    };
-
-    let ef = |element: usize, face: usize| ElementFace { element: element as u32, face: face as u8 };
-    let mut node_sets: IndexMap<String, Vec<u32>> = IndexMap::new();
-    let mut face_sets: IndexMap<String, Vec<ElementFace>> = IndexMap::new();
-    for key in [sets::LUMEN_WALL_FACES, sets::WALL_LUMEN_FACES, sets::WALL_OUTER_FACES] {
-        face_sets.insert(key.into(), vec![]);
-    }
-    for (_, _, name) in &end_names {
-        face_sets.insert(sets::lumen_end(name), vec![]);
-        face_sets.insert(sets::wall_end(name), vec![]);
-    }
-    let mut add_face =
-        |set: &str, e: usize, face: usize| face_sets.get_mut(set).expect("declared above").push(ef(e, face));
-
-    // Elements: lumen (core + lateral) of every branch, then each wall region.
-    let mut hexes: Vec<Hex> = Vec::new();
-    let mut regions = Vec::new();
-    let mut branch_of = Vec::new();
-    // The junction each element belongs to (transition intervals), for the report.
-    let mut junction_of: Vec<Option<usize>> = Vec::new();
-    let interval_junction = |pb: &ProjectedBranch, i: usize| -> Option<usize> {
-        if !(pb.sections[i].in_junction || pb.sections[i + 1].in_junction) {
-            return None;
-        }
-        // The nearer end's junction first (a branch between two junctions has both).
-        let ends = if i < pb.sections.len() / 2 { [pb.start, pb.end] } else { [pb.end, pb.start] };
-        ends.iter().find_map(|e| match e {
-            BranchEnd::Fold(f) => Some(f.junction),
-            BranchEnd::Vessel { .. } | BranchEnd::Dome => None,
-        })
-    };
-    let core_quads: Vec<Vec<[usize; 4]>> = templates.iter().map(|t| t.core_quads()).collect();
-    for (b, pb) in projected.iter().enumerate() {
-        let last = pb.sections.len() - 2;
-        for i in 0..=last {
-            let st = (&branch_nodes[b].stations[i], &branch_nodes[b].stations[i + 1]);
-            let first_of_interval = hexes.len();
-            for q in &core_quads[b] {
-                hexes.push([
-                    st.0[q[0]], st.0[q[1]], st.0[q[2]], st.0[q[3]], st.1[q[0]], st.1[q[1]], st.1[q[2]], st.1[q[3]],
-                ]);
-            }
-            for level in 0..r_cells {
-                for k in 0..ring_len(b) {
-                    if level == r_cells - 1 {
-                        add_face(sets::LUMEN_WALL_FACES, hexes.len(), FACE_OUTER);
-                    }
-                    hexes.push(ring_hex(b, i, level, k));
-                }
-            }
-            for (cond, inlet, face) in [(i == 0, true, FACE_UPSTREAM), (i == last, false, FACE_DOWNSTREAM)] {
-                if let (true, Some(name)) = (cond, end_name(b, inlet)) {
-                    for e in first_of_interval..hexes.len() {
-                        add_face(&sets::lumen_end(name), e, face);
-                    }
-                }
-            }
-            branch_of.resize(hexes.len(), b as u32);
-            junction_of.resize(hexes.len(), interval_junction(pb, i));
-        }
-        if let Some(top) = &branch_nodes[b].dome_top {
-            for level in 0..r_cells {
-                for q in &core_quads[b] {
-                    if level == r_cells - 1 {
-                        add_face(sets::LUMEN_WALL_FACES, hexes.len(), FACE_OUTER);
-                    }
-                    hexes.push(top_hex(&top[level], &top[level + 1], q));
-                }
-            }
-            branch_of.resize(hexes.len(), b as u32);
-            junction_of.resize(hexes.len(), None);
-        }
-    }
-    regions.resize(hexes.len(), Region::Lumen);
-    let by_corners = vec![Validity::Corners; hexes.len()];
-    improve_junction_nodes(&mut nodes, &hexes, &movable, surface, optimisation.pattern_search, &by_corners);
+    let ends = vessel_end_names(projected);
+    let mut elements = Elements::new(&ends);
+    add_lumen_elements(&mut elements, projected, &numbering, levels, &ends);
+    let by_corners = vec![Validity::Corners; elements.hexes.len()];
+    improve_junction_nodes(&mut nodes, &elements.hexes, &movable, surface, optimisation.pattern_search, &by_corners);
     // The lumen is OpenFOAM's mesh: its poor elements are judged with the face pyramids too, and
     // optimised with them in the objective. By the corners alone, the optimisation flattened a
     // crotch cell of gmsh_bifurcation (medium) until its centre left its wall face's plane.
-    improve_poor(&mut nodes, &hexes, &poor_mobility, surface, Validity::CornersAndPyramids);
+    improve_poor(&mut nodes, &elements.hexes, &poor_mobility, surface, Validity::CornersAndPyramids);
     // The wall grows from the surface where its nodes ended up (they may have slid).
-    let lay_wall = |nodes: &mut [Point3<f64>], junction_wall: JunctionWall| -> Vec<Vector3<f64>> {
-        let (dirs, thickness) = growth(nodes, junction_wall);
-        for ((&s, dir), t) in surface_nodes.iter().zip(&dirs).zip(&thickness) {
-            let p = nodes[s as usize];
-            for (w, &tau) in levels.wall[1..].iter().enumerate() {
-                nodes[wall_base[s as usize] as usize + w] = p + dir * (t * tau);
-            }
-        }
-        dirs
-    };
-    let first_dirs = lay_wall(&mut nodes, junction_walls[0]);
-    for region in Region::WALL {
-        for (b, pb) in projected.iter().enumerate() {
-            let last = pb.sections.len() - 2;
-            for i in 0..=last {
-                for (w, r) in levels.wall_regions.iter().enumerate() {
-                    if *r != region {
-                        continue;
-                    }
-                    for k in 0..ring_len(b) {
-                        let e = hexes.len();
-                        if w == 0 {
-                            add_face(sets::WALL_LUMEN_FACES, e, FACE_INNER);
-                        }
-                        if w == w_cells - 1 {
-                            add_face(sets::WALL_OUTER_FACES, e, FACE_OUTER);
-                        }
-                        for (cond, inlet, face) in [(i == 0, true, FACE_UPSTREAM), (i == last, false, FACE_DOWNSTREAM)]
-                        {
-                            if let (true, Some(name)) = (cond, end_name(b, inlet)) {
-                                add_face(&sets::wall_end(name), e, face);
-                            }
-                        }
-                        hexes.push(ring_hex(b, i, r_cells + w, k));
-                        regions.push(region);
-                        branch_of.push(b as u32);
-                        junction_of.push(interval_junction(pb, i));
-                    }
-                }
-            }
-            let Some(top) = &branch_nodes[b].dome_top else { continue };
-            let wall_level = |w: usize| -> Vec<u32> {
-                top[r_cells].iter().map(|&s| if w == 0 { s } else { wall_base[s as usize] + (w - 1) as u32 }).collect()
-            };
-            for (w, r) in levels.wall_regions.iter().enumerate() {
-                if *r != region {
-                    continue;
-                }
-                let (below, above) = (wall_level(w), wall_level(w + 1));
-                for q in &core_quads[b] {
-                    let e = hexes.len();
-                    if w == 0 {
-                        add_face(sets::WALL_LUMEN_FACES, e, FACE_INNER);
-                    }
-                    if w == w_cells - 1 {
-                        add_face(sets::WALL_OUTER_FACES, e, FACE_OUTER);
-                    }
-                    hexes.push(top_hex(&below, &above, q));
-                    regions.push(region);
-                    branch_of.push(b as u32);
-                    junction_of.push(None);
-                }
-            }
-        }
-    }
-
-    // Where the wall has an element below the bar (the lumen's optimisation does not see the
-    // wall), the wall nodes around it move across their growth directions, so the wall keeps
-    // its thickness.
-    // gmsh_aortic_arch at medium: a junction's wall 0.116 -> 0.216; gmsh_cerebral_aneurysm at
-    // medium: an intima element inverted (-0.147) where the wall grows over the sac's neck.
-    // Walls above the bar stay as grown (raising their worst element costs their mean a little).
-    let wall_hexes: Vec<Hex> = (0..hexes.len()).filter(|&e| regions[e].is_wall()).map(|e| hexes[e]).collect();
-    let improve_wall = |nodes: &mut [Point3<f64>], dirs: &[Vector3<f64>]| {
-        let mut wall_movable = vec![Freedom::Fixed; nodes.len()];
-        for (&s, d) in surface_nodes.iter().zip(dirs) {
-            if !end_tangent.contains_key(&s) {
-                for w in 0..w_cells {
-                    wall_movable[wall_base[s as usize] as usize + w] = Freedom::Across(*d);
-                }
-            }
-        }
-        // By the corners alone: a wall node moves only across its growth direction, which cannot
-        // thicken a cell, and the wall's crotch cells whose pyramids fail are thin ones (judged
-        // with the pyramids, gmsh_carotid_bifurcation at medium kept them at -1 through every
-        // round and took 2.7 times the CPU time). A finish whose wall fails a pyramid loses to one
-        // whose wall does not (see `pipeline::mesh_tree`'s judge).
-        improve_poor(nodes, &wall_hexes, &wall_movable, surface, Validity::Corners);
-    };
-    improve_wall(&mut nodes, &first_dirs);
+    let first_dirs = wall.lay(&mut nodes, junction_walls[0]);
+    add_wall_elements(&mut elements, projected, &numbering, levels, &ends);
+    let wall_hexes: Vec<Hex> =
+        (0..elements.hexes.len()).filter(|&e| elements.regions[e].is_wall()).map(|e| elements.hexes[e]).collect();
+    wall.improve(&mut nodes, &first_dirs, &wall_hexes);
 
     // Node sets: the interface, the outer wall, and each end's lumen and wall nodes.
-    node_sets.insert(sets::INTERFACE_NODES.into(), surface_nodes.clone());
+    let mut node_sets: IndexMap<String, Vec<u32>> = IndexMap::new();
+    node_sets.insert(sets::INTERFACE_NODES.into(), graph.nodes.clone());
     node_sets.insert(
         sets::OUTER_WALL_NODES.into(),
-        surface_nodes.iter().map(|&s| wall_base[s as usize] + (w_cells - 1) as u32).collect(),
+        graph.nodes.iter().map(|&s| numbering.above(s, levels.wall_cells())).collect(),
     );
-    let mut ends = Vec::new();
-    for (b, is_inlet, name) in &end_names {
-        let pb = &projected[*b];
-        let i = if *is_inlet { 0 } else { pb.sections.len() - 1 };
-        node_sets.insert(sets::lumen_end(name), branch_nodes[*b].stations[i].clone());
-        let wall: Vec<u32> = (r_cells..=r_cells + w_cells)
-            .flat_map(|l| (0..ring_len(*b)).map(move |k| (l, k)))
-            .map(|(l, k)| ring(*b, i, l, k))
-            .collect();
-        node_sets.insert(sets::wall_end(name), wall);
-        let station = &pb.sections[i].station;
-        let t = station.frame.tangent;
-        ends.push(VesselEnd {
-            name: name.clone(),
-            is_inlet: *is_inlet,
-            branch: *b,
-            centre: station.point,
-            outward_normal: if *is_inlet { -t } else { t },
-        });
-    }
+    let vessel_ends = vessel_end_sets(&mut node_sets, projected, &numbering, levels, &ends);
     for v in node_sets.values_mut() {
         v.sort_unstable();
         v.dedup();
     }
+    let Elements { hexes, regions, branch_of, junction_of, mut face_sets } = elements;
     for v in face_sets.values_mut() {
         v.sort_unstable();
     }
@@ -608,20 +162,131 @@ pub fn build_volume(
         fibres: Vec::new(),
         quality: Vec::new(),
         layers: layers.to_vec(),
-        ends,
+        ends: vessel_ends,
         node_sets,
         face_sets,
-        branch_names: branch_names.to_vec(),
+        branch_names: inputs.branch_names.to_vec(),
     };
     let mut meshes = Vec::with_capacity(junction_walls.len());
     for &junction_wall in &junction_walls[1..] {
         let mut other = mesh.clone();
-        let dirs = lay_wall(&mut other.nodes, junction_wall);
-        improve_wall(&mut other.nodes, &dirs);
+        let dirs = wall.lay(&mut other.nodes, junction_wall);
+        wall.improve(&mut other.nodes, &dirs, &wall_hexes);
         meshes.push(other);
     }
     meshes.insert(0, mesh);
     (meshes, junction_of)
+}
+
+/// Smooths the transitions' lumen-surface quads on the triangles (see
+/// [`crate::surface_smoothing`]), their rays' ring nodes following.
+fn smooth_transition_surface(
+    nodes: &mut [Point3<f64>],
+    mut columns: IndexMap<u32, Vec<RayNode>>,
+    graph: &SurfaceGraph,
+    surface: &LumenSurface,
+) {
+    // In node order, so the Gauss-Seidel passes do not depend on the branches' order.
+    columns.sort_keys();
+    let smoothed: Vec<SmoothedNode> = columns
+        .into_iter()
+        .map(|(node, column)| {
+            let around = &graph.neighbours[graph.position[node as usize]];
+            SmoothedNode { node, neighbours: around.iter().map(|&j| graph.nodes[j]).collect(), column }
+        })
+        .collect();
+    smooth_on_surface(nodes, &smoothed, surface);
+}
+
+/// How the wall is laid over the lumen surface: along which direction and how thick at every
+/// surface node, the wall nodes above it at their levels.
+struct WallLayout<'a> {
+    inputs: &'a VolumeInputs<'a>,
+    quads: &'a [[u32; 4]],
+    graph: &'a SurfaceGraph,
+    /// Per lumen node: the ray it was placed on.
+    ray: &'a [Vector3<f64>],
+    /// Per lumen node: whether it lies on a junction's section.
+    in_junction: &'a [bool],
+    /// The vessel ends' surface nodes, with their sections' tangents.
+    end_tangent: HashMap<u32, Vector3<f64>>,
+    /// The nominal thickness at each surface node (in the graph's order).
+    nominal: Vec<f64>,
+    numbering: &'a Numbering<'a>,
+}
+
+impl WallLayout<'_> {
+    /// Growth direction and thickness at every surface node, from the surface as it stands.
+    fn growth(&self, nodes: &[Point3<f64>], junction_wall: JunctionWall) -> (Vec<Vector3<f64>>, Vec<f64>) {
+        let graph = self.graph;
+        let dirs: Vec<Vector3<f64>> = match self.inputs.wall_growth {
+            WallGrowth::Ray => graph.nodes.iter().map(|&s| self.ray[s as usize]).collect(),
+            WallGrowth::Normal => {
+                let junction_passes = match junction_wall {
+                    JunctionWall::Normal => 0,
+                    _ => JUNCTION_SMOOTHING_PASSES,
+                };
+                let mut dirs = surface_normals(
+                    nodes,
+                    self.quads,
+                    graph,
+                    self.ray,
+                    &self.end_tangent,
+                    self.in_junction,
+                    junction_passes,
+                    &self.nominal,
+                );
+                // Along the rays in junction transitions, where asked: the caller keeps whichever
+                // wall is better (see `build_volume`'s caller).
+                if junction_wall == JunctionWall::Ray {
+                    for (d, &s) in dirs.iter_mut().zip(&graph.nodes) {
+                        if self.in_junction[s as usize] && !self.end_tangent.contains_key(&s) {
+                            *d = self.ray[s as usize].normalize();
+                        }
+                    }
+                }
+                dirs
+            }
+        };
+        let branched = !self.inputs.junctions.is_empty();
+        let thickness = crotch_limited_thickness(nodes, graph, &dirs, self.inputs.surface, &self.nominal, branched);
+        (dirs, thickness)
+    }
+
+    /// Places the wall's nodes above the surface nodes where they stand; the growth directions.
+    fn lay(&self, nodes: &mut [Point3<f64>], junction_wall: JunctionWall) -> Vec<Vector3<f64>> {
+        let (dirs, thickness) = self.growth(nodes, junction_wall);
+        for ((&s, dir), t) in self.graph.nodes.iter().zip(&dirs).zip(&thickness) {
+            let p = nodes[s as usize];
+            for (w, &tau) in self.inputs.levels.wall[1..].iter().enumerate() {
+                nodes[self.numbering.above(s, w + 1) as usize] = p + dir * (t * tau);
+            }
+        }
+        dirs
+    }
+
+    /// Where the wall has an element below the bar (the lumen's optimisation does not see the
+    /// wall), the wall nodes around it move across their growth directions `dirs`, so the wall
+    /// keeps its thickness. gmsh_aortic_arch at medium: a junction's wall 0.116 -> 0.216;
+    /// gmsh_cerebral_aneurysm at medium: an intima element inverted (-0.147) where the wall
+    /// grows over the sac's neck. Walls above the bar stay as grown (raising their worst
+    /// element costs their mean a little).
+    fn improve(&self, nodes: &mut [Point3<f64>], dirs: &[Vector3<f64>], wall_hexes: &[Hex]) {
+        let mut wall_movable = vec![Freedom::Fixed; nodes.len()];
+        for (&s, d) in self.graph.nodes.iter().zip(dirs) {
+            if !self.end_tangent.contains_key(&s) {
+                for w in 1..=self.inputs.levels.wall_cells() {
+                    wall_movable[self.numbering.above(s, w) as usize] = Freedom::Across(*d);
+                }
+            }
+        }
+        // By the corners alone: a wall node moves only across its growth direction, which cannot
+        // thicken a cell, and the wall's crotch cells whose pyramids fail are thin ones (judged
+        // with the pyramids, gmsh_carotid_bifurcation at medium kept them at -1 through every
+        // round and took 2.7 times the CPU time). A finish whose wall fails a pyramid loses to one
+        // whose wall does not (see `pipeline::mesh_tree`'s judge).
+        improve_poor(nodes, wall_hexes, &wall_movable, self.inputs.surface, Validity::Corners);
+    }
 }
 
 /// Sweeps of the junction node optimisation.
