@@ -79,6 +79,8 @@ pub struct JunctionGeometry {
     pub spine_down: f64,
     /// Core cells along the spine.
     pub spine_cells: usize,
+    /// Scale of the folds' core about the centre (1 unless [`keep_fold_cores_inside`] shrank it).
+    pub core_scale: f64,
 }
 
 fn describe_point(p: &Point3<f64>) -> String {
@@ -130,7 +132,10 @@ impl JunctionGeometry {
         let x = cut.across(p.x);
         let page = &self.pages[self.page_of(slot, x)];
         let along = if p.y >= 0.0 { self.spine_up } else { self.spine_down };
-        self.centre + self.axis * (p.y * along) + page.dir * (x.abs() * page.depth)
+        // The core scales (ray targets, beyond it, do not).
+        let in_core = x.abs().max(p.y.abs()) <= cut.core_size * (1.0 + 1e-12);
+        let scale = if in_core { self.core_scale } else { 1.0 };
+        self.centre + self.axis * (scale * p.y * along) + page.dir * (scale * x.abs() * page.depth)
     }
 
     /// The page of a slot's fold that a point lies on, from its signed distance `x` across the
@@ -396,6 +401,7 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
         spine_up: 0.0,
         spine_down: 0.0,
         spine_cells: 0,
+        core_scale: 1.0,
     };
     let reach = 20.0 * r_x;
     for i in 0..k {
@@ -410,6 +416,44 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
     geometry.spine_up = wall_distance(surface, &x, &axis, reach, &where_)?;
     geometry.spine_down = wall_distance(surface, &x, &(-axis), reach, &where_)?;
     Ok(geometry)
+}
+
+/// Largest share of the way from a junction's centre to the wall that the boundary of a fold's
+/// core may take once [`keep_fold_cores_inside`] has shrunk it.
+const FOLD_CORE_REACH: f64 = 0.8;
+/// Points sampled along each side of a page's half of the core's boundary.
+const FOLD_CORE_SAMPLES: usize = 8;
+
+/// Shrinks a junction's fold core (all its pages' and the spine's core nodes, about the centre)
+/// where its boundary would leave the lumen, until it lies within [`FOLD_CORE_REACH`] of the
+/// wall; a junction whose core lies inside keeps it as it is. The core is placed by the pages'
+/// depths and the spine's lengths, each measured in one direction from the centre: between
+/// them, where the lumen of a junction of many branches is not convex, a corner of the core
+/// can lie outside it, and its rays then miss the wall (sphinxsys_aortic_arch, where the
+/// brachiocephalic trunk and two arteries leave the arch within a radius of one another).
+pub fn keep_fold_cores_inside(junctions: &mut [JunctionGeometry], core_size: f64, surface: &LumenSurface) {
+    for g in junctions.iter_mut() {
+        let n = FOLD_CORE_SAMPLES;
+        let side = |i: usize| core_size * i as f64 / n as f64;
+        // A page's half of the core's boundary: its rim (x = core_size) and its two ends along
+        // the spine (y = +-core_size).
+        let boundary: Vec<(f64, f64)> = (0..=2 * n)
+            .map(|i| (core_size, side(i) - core_size))
+            .chain((0..n).flat_map(|i| [(side(i), core_size), (side(i), -core_size)]))
+            .collect();
+        let mut scale: f64 = 1.0;
+        for page in &g.pages {
+            for &(x, y) in &boundary {
+                let along = if y >= 0.0 { g.spine_up } else { g.spine_down };
+                let offset = g.axis * (y * along) + page.dir * (x * page.depth);
+                let distance = offset.norm();
+                if let Some(hit) = surface.first_hit(&g.centre, &(offset / distance), distance) {
+                    scale = scale.min(FOLD_CORE_REACH * hit.distance / distance);
+                }
+            }
+        }
+        g.core_scale = scale;
+    }
 }
 
 /// Checks that the junctions at the two ends of every branch leave it a length of its own on
@@ -870,7 +914,37 @@ mod tests {
             spine_up: 2.5,
             spine_down: 1.5,
             spine_cells: 8,
+            core_scale: 1.0,
         }
+    }
+
+    /// In a hemispherical dome of radius 2 over a tube, a junction centred where the dome
+    /// starts with its spine along the tube and pages 2 deep: a core reaching 0.8 of the way
+    /// along pages and spine puts its corners 0.8 sqrt 2 radii out, beyond the dome, and is
+    /// shrunk until they lie at FOLD_CORE_REACH of the way to it (about 1 / sqrt 2); a core of
+    /// 0.6 lies inside (its corners 0.85 radii out) and keeps its scale. The fold's core nodes
+    /// scale with it, its ray targets do not.
+    #[test]
+    fn a_fold_core_reaching_outside_the_lumen_is_shrunk_inside() {
+        let surface = LumenSurface::new(&crate::testing::domed_tube_surface(2.0, 10.0, 2.0)).unwrap();
+        let mut g = three_pages();
+        g.centre = Point3::new(0.0, 0.0, 10.0);
+        g.pages.iter_mut().for_each(|p| p.depth = 2.0);
+        (g.spine_up, g.spine_down) = (2.0, 2.0);
+        let mut wide = [g.clone()];
+        keep_fold_cores_inside(&mut wide, 0.8, &surface);
+        assert!((wide[0].core_scale - 0.5_f64.sqrt()).abs() < 0.01, "scale {}", wide[0].core_scale);
+        let mut narrow = [g.clone()];
+        keep_fold_cores_inside(&mut narrow, 0.6, &surface);
+        assert_eq!(narrow[0].core_scale, 1.0);
+
+        let cut = SpineCut { x: 0.0, core_size: 0.8 };
+        let (corner, target) = (Vector2::new(0.8, 0.8), Vector2::new(1.6, 1.6));
+        let out = |g: &JunctionGeometry, p: &Vector2<f64>| g.fold(1, p, &cut) - g.centre;
+        let s = wide[0].core_scale;
+        assert!((out(&wide[0], &corner) - out(&g, &corner) * s).norm() < 1e-12, "the core scales");
+        assert!((out(&wide[0], &target) - out(&g, &target)).norm() < 1e-12, "the targets stay");
+        assert!(out(&wide[0], &corner).norm() < 0.81 * 2.0, "the corner lies inside the dome");
     }
 
     /// A fold split down the middle keeps every template x as it is (to the bit); an

@@ -16,7 +16,8 @@ use crate::input::{
 };
 use crate::junction::{
     allowed_turns, analyse_junctions, branch_core_dims, check_junction_spacing, equal_cells, find_junction_overlap,
-    fold_normal, signed_angle, twist_frames, unanalysable_close_junction, FoldEnd, JunctionGeometry,
+    fold_normal, keep_fold_cores_inside, signed_angle, twist_frames, unanalysable_close_junction, FoldEnd,
+    JunctionGeometry,
 };
 use crate::mesh::VesselMesh;
 use crate::output::OutputFolder;
@@ -610,6 +611,7 @@ pub fn mesh_tree(
     // Every junction's pages get half the core's cells, so every branch keeps the square O-grid
     // of the settings (thin pages, BRANCHING.md §4.3, are to give small side branches fewer).
     equal_cells(&mut junctions, l.core_elements);
+    keep_fold_cores_inside(&mut junctions, l.core_size, lumen_surface);
     let templates: Vec<SectionTemplate> = branch_core_dims(&tree, &junctions, l.core_elements, lumen_surface)?
         .into_iter()
         .map(|(nx, ny)| SectionTemplate::rect(nx, ny, l.core_size, l.ray_reach))

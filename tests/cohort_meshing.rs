@@ -37,6 +37,13 @@ const WITHIN_BARS: [&str; 14] = [
 /// small branch funnels into an inverted element and is refused).
 const WITHIN_BARS_AT_COARSE: [&str; 1] = ["openlb_cerebral_aneurysm_tree"];
 
+/// The cases meshed at the coarse preset, every end, though short of a bar (they were refused
+/// before): a change that refuses one again fails here. The aortic arch of SPHinXsys, whose
+/// three arteries leave the arch within a radius of one another, since a junction's fold core
+/// is kept inside the lumen (its corners reached past the wall and their rays missed it); at
+/// medium its ascending aorta's transition still folds (-0.035) and it is refused.
+const MESHED_AT_COARSE: [&str; 1] = ["sphinxsys_aortic_arch"];
+
 /// The cases whose mesh leaves part of the surface out, said by a `surface_not_meshed` warning:
 /// none since a saccular aneurysm's sac is meshed as a blind branch closed by a dome.
 const SURFACE_LEFT_OUT: [&str; 0] = [];
@@ -66,6 +73,7 @@ fn cohort_at(preset: &str) {
     let mut failures = vec![];
     let expected_within =
         |name: &str| WITHIN_BARS.contains(&name) || (preset == "coarse" && WITHIN_BARS_AT_COARSE.contains(&name));
+    let must_mesh = |name: &str| preset == "coarse" && MESHED_AT_COARSE.contains(&name);
     for case in &cases {
         let surface = vessels.join(&case.name).join(&case.surface);
         assert!(surface.exists(), "{}: {} is missing", case.name, surface.display());
@@ -83,7 +91,7 @@ fn cohort_at(preset: &str) {
             // A refusal: one line, naming the surface.
             let error = stderr.lines().find(|l| l.starts_with("vesselhex: error:")).unwrap_or_default();
             println!("{preset}: {:<32} {:>61.1}  refused: {}", case.name, seconds, error);
-            if !error.contains(&case.surface) || expected_within(&case.name) {
+            if !error.contains(&case.surface) || expected_within(&case.name) || must_mesh(&case.name) {
                 failures.push(format!("{}: {error}", case.name));
             }
             continue;
