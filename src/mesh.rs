@@ -254,6 +254,10 @@ impl VesselMesh {
         }
         nodes
     }
+    /// Whether element `e` lies in a saccular aneurysm's sac (see [`is_sac`]).
+    pub fn in_sac(&self, e: usize) -> bool {
+        is_sac(&self.branch_names[self.branch_of[e] as usize])
+    }
     /// Corner coordinates of element `e`.
     pub fn corners(&self, e: usize) -> [Point3<f64>; 8] {
         let h = &self.hexes[e];

@@ -97,11 +97,10 @@ pub fn build_volume(
     let VolumeInputs { projected, templates, junctions, levels, layers, surface, .. } = *inputs;
     assert!(!junction_walls.is_empty(), "at least one wall is asked for");
     assert_eq!(templates.len(), projected.len(), "one template per branch");
-    let r_cells = levels.lumen_cells();
 
     let (lumen, branch_nodes) = place_lumen_nodes(projected, templates, junctions, levels, &optimisation);
     let mut numbering = Numbering::new(&branch_nodes, templates, levels);
-    let quads = lumen_surface_quads(projected, &numbering, r_cells);
+    let quads = lumen_surface_quads(projected, &numbering);
     let graph = SurfaceGraph::new(&quads, lumen.nodes.len());
     let LumenNodes { mut nodes, radius, in_junction, ray, movable, poor_mobility, smoothed_columns, .. } = lumen;
     if optimisation.smooth_surface {
@@ -115,7 +114,7 @@ pub fn build_volume(
         graph: &graph,
         ray: &ray,
         in_junction: &in_junction,
-        end_tangent: vessel_end_tangents(projected, &numbering, r_cells),
+        end_tangent: vessel_end_tangents(projected, &numbering),
         nominal: graph.nodes.iter().map(|&s| (inputs.wall_thickness)(radius[s as usize])).collect(),
         numbering: &numbering,
     };

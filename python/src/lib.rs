@@ -318,8 +318,7 @@ impl Mesh {
     /// 1 where the element lies in a saccular aneurysm's sac (mesh.vtu's `sac`), else 0.
     #[getter]
     fn sac<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i32>> {
-        let mesh = self.mesh();
-        self.per_element(py, |e| vesselhex::mesh::is_sac(&mesh.branch_names[mesh.branch_of[e] as usize]) as i32)
+        self.per_element(py, |e| self.mesh().in_sac(e) as i32)
     }
     #[getter]
     fn scaled_jacobian<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {

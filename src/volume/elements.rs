@@ -196,8 +196,7 @@ pub(super) fn add_wall_elements(
                     }
                 }
             }
-            let Some(top) = &numbering.branches[b].dome_top else { continue };
-            let surface = &top[r_cells];
+            let Some(surface) = numbering.dome_surface(b) else { continue };
             let wall_level = |w: usize| -> Vec<u32> { surface.iter().map(|&s| numbering.above(s, w)).collect() };
             for &w in &layers {
                 let (below, above) = (wall_level(w), wall_level(w + 1));
@@ -211,25 +210,20 @@ pub(super) fn add_wall_elements(
 
 /// The lumen surface as quads, each wound so that its normal leaves the lumen: circumferential
 /// x axial, the ring running counter-clockwise about each branch's flow direction.
-pub(super) fn lumen_surface_quads(
-    projected: &[ProjectedBranch],
-    numbering: &Numbering,
-    r_cells: usize,
-) -> Vec<[u32; 4]> {
+pub(super) fn lumen_surface_quads(projected: &[ProjectedBranch], numbering: &Numbering) -> Vec<[u32; 4]> {
     let mut quads: Vec<[u32; 4]> = Vec::new();
     for (b, pb) in projected.iter().enumerate() {
         for i in 0..pb.sections.len() - 1 {
             for k in 0..numbering.ring_len(b) {
                 quads.push([
-                    numbering.lumen_ring(b, i, r_cells, k),
-                    numbering.lumen_ring(b, i, r_cells, k + 1),
-                    numbering.lumen_ring(b, i + 1, r_cells, k + 1),
-                    numbering.lumen_ring(b, i + 1, r_cells, k),
+                    numbering.surface(b, i, k),
+                    numbering.surface(b, i, k + 1),
+                    numbering.surface(b, i + 1, k + 1),
+                    numbering.surface(b, i + 1, k),
                 ]);
             }
         }
-        if let Some(top) = &numbering.branches[b].dome_top {
-            let surface = &top[r_cells];
+        if let Some(surface) = numbering.dome_surface(b) {
             quads.extend(
                 numbering.core_quads(b).iter().map(|q| [surface[q[0]], surface[q[1]], surface[q[2]], surface[q[3]]]),
             );
@@ -240,18 +234,14 @@ pub(super) fn lumen_surface_quads(
 
 /// The lumen-surface nodes of the vessel ends' sections, each with its section's tangent: their
 /// wall nodes stay in the end planes.
-pub(super) fn vessel_end_tangents(
-    projected: &[ProjectedBranch],
-    numbering: &Numbering,
-    r_cells: usize,
-) -> HashMap<u32, Vector3<f64>> {
+pub(super) fn vessel_end_tangents(projected: &[ProjectedBranch], numbering: &Numbering) -> HashMap<u32, Vector3<f64>> {
     let mut end_tangent = HashMap::new();
     for (b, pb) in projected.iter().enumerate() {
         let last = pb.sections.len() - 1;
         for (i, end) in [(0, &pb.start), (last, &pb.end)] {
             if matches!(end, BranchEnd::Vessel { .. }) {
                 for k in 0..numbering.ring_len(b) {
-                    end_tangent.insert(numbering.lumen_ring(b, i, r_cells, k), pb.sections[i].station.frame.tangent);
+                    end_tangent.insert(numbering.surface(b, i, k), pb.sections[i].station.frame.tangent);
                 }
             }
         }

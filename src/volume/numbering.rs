@@ -140,9 +140,7 @@ fn place_station(
     }
     for (level, &rho) in levels.lumen.iter().enumerate().skip(1) {
         for k in 0..m {
-            let (a, b) = (sec.origins[k], sec.surface[k]);
-            // The surface level is the hit point itself, bit for bit.
-            let p = if rho == 1.0 { b } else { a + (b - a) * rho };
+            let p = on_ray(sec.origins[k], sec.surface[k], rho);
             let free = if inner_movable && level < r_cells {
                 Freedom::Free
             } else if surface_movable && level == r_cells {
@@ -158,6 +156,16 @@ fn place_station(
         add_columns(&mut lumen.smoothed_columns, &ids, template, sec, levels);
     }
     ids
+}
+
+/// The node at radial level `rho` (0 at the core, 1 at the surface) of a ray from `origin` to
+/// its `hit` on the surface: the surface level is the hit point itself, bit for bit.
+fn on_ray(origin: Point3<f64>, hit: Point3<f64>, rho: f64) -> Point3<f64> {
+    if rho == 1.0 {
+        hit
+    } else {
+        origin + (hit - origin) * rho
+    }
 }
 
 /// A dome's top grid (see [`BranchNodes::dome_top`]): new nodes on the top rays, the last
@@ -185,9 +193,8 @@ fn place_dome_top(
                 ids.push(last[core_count + (level - 1) * m + k]);
                 continue;
             }
-            let (a, b) = (dome.origins[c], dome.surface[c]);
             let node = NewNode {
-                point: if rho == 1.0 { b } else { a + (b - a) * rho },
+                point: on_ray(dome.origins[c], dome.surface[c], rho),
                 radius,
                 in_junction: false,
                 ray: dome.dirs[c],
@@ -248,6 +255,16 @@ impl<'a> Numbering<'a> {
         } else {
             st[template.core_len() + (level - 1) * m + k]
         }
+    }
+
+    /// A lumen-surface node (ring level R).
+    pub fn surface(&self, b: usize, i: usize, k: usize) -> u32 {
+        self.lumen_ring(b, i, self.r_cells, k)
+    }
+
+    /// The lumen-surface nodes of branch `b`'s dome top, if it has one (core grid order).
+    pub fn dome_surface(&self, b: usize) -> Option<&[u32]> {
+        self.branches[b].dome_top.as_ref().map(|top| top[self.r_cells].as_slice())
     }
 
     /// The wall node `w` levels above the lumen-surface node `s` (`s` itself for 0).

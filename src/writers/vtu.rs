@@ -169,7 +169,7 @@ pub fn write_vtu(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
         i32_array("region", n, |e| mesh.regions[e].code()),
         i32_array("branch", n, |e| mesh.branch_of[e] as i32),
         // The sac of a saccular aneurysm, 1 (CFD users look at it on its own), else 0.
-        i32_array("sac", n, |e| crate::mesh::is_sac(&mesh.branch_names[mesh.branch_of[e] as usize]) as i32),
+        i32_array("sac", n, |e| mesh.in_sac(e) as i32),
         f64_array("scaled_jacobian", n, |e| mesh.quality[e].scaled_jacobian),
         f64_array("equiangle_skew", n, |e| mesh.quality[e].equiangle_skew),
         vector_array("e_long", n, |e| mesh.triads[e].e_long),
