@@ -31,6 +31,9 @@ use std::f64::consts::{PI, TAU};
 /// Branches whose projected directions are closer than this about the spine cannot share a
 /// junction (BRANCHING.md §4.1).
 const MIN_ANGULAR_GAP_DEG: f64 = 25.0;
+/// The spine's axis is chosen among those every branch leaves at least this far off, where
+/// any is (see [`spine_axis`]).
+const AXIS_CLEARANCE_DEG: f64 = 25.0;
 /// Largest number of branches (parent included) at one junction.
 const MAX_BRANCHES: usize = 5;
 
@@ -286,6 +289,79 @@ pub fn unanalysable_close_junction(tree: &CenterlineTree, surface: &LumenSurface
 /// are one junction in fact.
 const CLOSE_JUNCTIONS: f64 = 2.0;
 
+/// The angular gaps about an axis between consecutive projected directions, the smallest
+/// (radians); 0 when a direction lies within 11.5 degrees of the axis (its projection is too
+/// short to order).
+fn axis_gap(dirs: &[Vector3<f64>], a: &Vector3<f64>) -> f64 {
+    let reference = dirs[0] - a * dirs[0].dot(a);
+    if reference.norm() < 1e-9 {
+        return 0.0;
+    }
+    let reference = reference.normalize();
+    let mut angles: Vec<f64> = dirs
+        .iter()
+        .map(|d| {
+            let p = d - a * d.dot(a);
+            if p.norm() < 0.2 {
+                return f64::NAN;
+            }
+            signed_angle(&reference, &p.normalize(), a).rem_euclid(TAU)
+        })
+        .collect();
+    if angles.iter().any(|v| v.is_nan()) {
+        return 0.0;
+    }
+    min_gap(&mut angles)
+}
+
+/// The spine's axis for branches leaving a junction along `dirs` (unit), and its smallest
+/// angular gap (radians): of the best-fit plane's normal and the normals of the planes of pairs
+/// of directions, the one that separates the projected directions best (the first of equals).
+/// Where that axis is not acceptable (a gap under [`MIN_ANGULAR_GAP_DEG`], or a branch within
+/// [`AXIS_CLEARANCE_DEG`] of it: it would fold onto pages that hold its own direction), the
+/// best acceptable one of them, or else the directions' mean if acceptable. The mean is the
+/// axis of a junction whose branches leave like the legs of a tripod, where no plane fits them
+/// and the normal of a pair lies along the third (palabos_cerebral_aneurysm: the parent rising
+/// into a sac, the daughters leaving it level 46 degrees apart, each about 90 degrees from the
+/// parent; the best of the planes' normals lay 19 degrees off the parent, whose fold's rays ran
+/// down it and out of the inlet at medium; about the mean, the gaps are 84 degrees or more and
+/// every branch stands 29 degrees off).
+fn spine_axis(dirs: &[Vector3<f64>]) -> (Vector3<f64>, f64) {
+    let mut scatter = Matrix3::zeros();
+    for d in dirs {
+        scatter += d * d.transpose();
+    }
+    let eig = scatter.symmetric_eigen();
+    let mut candidates = vec![eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned()];
+    for i in 0..dirs.len() {
+        for j in i + 1..dirs.len() {
+            let c = dirs[i].cross(&dirs[j]);
+            if c.norm() > 1e-6 {
+                candidates.push(c.normalize());
+            }
+        }
+    }
+    let best_of = |candidates: &mut dyn Iterator<Item = &Vector3<f64>>| {
+        candidates.map(|c| (*c, axis_gap(dirs, c))).fold(None, |best: Option<(Vector3<f64>, f64)>, (c, g)| match best {
+            Some(b) if g <= b.1 + 1e-9 => Some(b),
+            _ => Some((c, g)),
+        })
+    };
+    let clearance = AXIS_CLEARANCE_DEG.to_radians().sin();
+    let acceptable = |(a, gap): &(Vector3<f64>, f64)| {
+        gap.to_degrees() >= MIN_ANGULAR_GAP_DEG && dirs.iter().all(|d| (d - a * d.dot(a)).norm() >= clearance)
+    };
+    let best = best_of(&mut candidates.iter()).expect("the best-fit plane's normal is a candidate");
+    if acceptable(&best) {
+        return best;
+    }
+    let mean: Vector3<f64> = dirs.iter().sum();
+    let by_mean = (mean.norm() > 1e-6).then(|| (mean.normalize(), axis_gap(dirs, &mean.normalize())));
+    best_of(&mut candidates.iter().filter(|c| acceptable(&(**c, axis_gap(dirs, c)))))
+        .or(by_mean.filter(acceptable))
+        .unwrap_or(best)
+}
+
 fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface) -> Result<JunctionGeometry> {
     let junction = &tree.junctions[index];
     let x = junction.centre;
@@ -311,52 +387,8 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
         })
         .collect();
 
-    // Axis: candidates are the best-fit plane's normal and the normals of the planes of pairs
-    // of branch directions; keep the one that separates the projected directions best.
-    let mut scatter = Matrix3::zeros();
-    for (d, _) in &dirs {
-        scatter += d * d.transpose();
-    }
-    let eig = scatter.symmetric_eigen();
-    let imin = eig.eigenvalues.imin();
-    let mut candidates = vec![eig.eigenvectors.column(imin).into_owned()];
-    for i in 0..dirs.len() {
-        for j in i + 1..dirs.len() {
-            let c = dirs[i].0.cross(&dirs[j].0);
-            if c.norm() > 1e-6 {
-                candidates.push(c.normalize());
-            }
-        }
-    }
-    let gap_of = |a: &Vector3<f64>| -> f64 {
-        let reference = dirs[0].0 - a * dirs[0].0.dot(a);
-        if reference.norm() < 1e-9 {
-            return 0.0;
-        }
-        let reference = reference.normalize();
-        let mut angles: Vec<f64> = dirs
-            .iter()
-            .map(|(d, _)| {
-                let p = d - a * d.dot(a);
-                if p.norm() < 0.2 {
-                    return f64::NAN;
-                }
-                signed_angle(&reference, &p.normalize(), a).rem_euclid(TAU)
-            })
-            .collect();
-        if angles.iter().any(|v| v.is_nan()) {
-            return 0.0;
-        }
-        min_gap(&mut angles)
-    };
-    let mut best = (candidates[0], gap_of(&candidates[0]));
-    for c in &candidates[1..] {
-        let g = gap_of(c);
-        if g > best.1 + 1e-9 {
-            best = (*c, g);
-        }
-    }
-    let (mut axis, gap) = best;
+    let directions: Vec<Vector3<f64>> = dirs.iter().map(|(d, _)| *d).collect();
+    let (mut axis, gap) = spine_axis(&directions);
     // A deterministic sign: the largest component positive.
     let imax = axis.iamax();
     if axis[imax] < 0.0 {
@@ -859,6 +891,38 @@ impl FoldKey {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Smallest angle (degrees) between the axis and any of the directions.
+    fn least_angle_to(axis: &Vector3<f64>, dirs: &[Vector3<f64>]) -> f64 {
+        dirs.iter().map(|d| d.dot(axis).abs().acos().to_degrees()).fold(f64::INFINITY, f64::min)
+    }
+
+    #[test]
+    fn a_planar_junction_keeps_its_planes_normal_as_the_spine() {
+        let at = |deg: f64| Vector3::new(deg.to_radians().cos(), deg.to_radians().sin(), 0.0);
+        let dirs = [at(180.0), at(30.0), at(-30.0)];
+        let (axis, gap) = spine_axis(&dirs);
+        assert!(axis.z.abs() > 1.0 - 1e-9, "axis {axis:?}");
+        assert!((gap.to_degrees() - 60.0).abs() < 1e-6, "gap {}", gap.to_degrees());
+    }
+
+    #[test]
+    fn a_tripod_junction_gets_an_axis_every_branch_stands_off() {
+        // palabos_cerebral_aneurysm's sac: the parent rises into it, the daughters leave it
+        // level, 46 degrees apart (directions measured there).
+        let dirs = [
+            Vector3::new(-0.1302, -0.0208, -0.9913).normalize(),
+            Vector3::new(0.6867, 0.7247, -0.0571).normalize(),
+            Vector3::new(-0.0323, 0.9761, -0.2149).normalize(),
+        ];
+        // The plane that fits best and the pairs' planes each leave a branch within 25 degrees
+        // of their normal, or the branches closer than 25 degrees about it.
+        let (axis, gap) = spine_axis(&dirs);
+        assert!(least_angle_to(&axis, &dirs) >= AXIS_CLEARANCE_DEG, "{}", least_angle_to(&axis, &dirs));
+        assert!(gap.to_degrees() >= 80.0, "gap {}", gap.to_degrees());
+        let mean: Vector3<f64> = dirs.iter().sum();
+        assert!(axis.dot(&mean.normalize()) > 1.0 - 1e-9, "the mean is the axis: {axis:?}");
+    }
 
     #[test]
     fn quarter_turns_of_indices_match_turns_of_points() {

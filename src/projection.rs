@@ -492,11 +492,10 @@ pub fn clear_transition_length(
         let towards = if at_start { -st.frame.tangent } else { st.frame.tangent };
         fold_wall.iter().all(|w| (w - st.point).dot(&towards) >= FOLD_MARGIN * r)
     };
-    // The two geometric tests first: they cost nothing next to twelve sets of rays.
+    // The geometric test first: it costs nothing next to twelve sets of rays.
     let clear = |d: f64| {
         let base = at(d);
         gentle_bend(d)
-            && fold_ahead(d)
             && (0..CLEAR_TURNS).all(|t| {
                 let phi = spacing_angle * t as f64;
                 let f = base.frame;
@@ -510,9 +509,18 @@ pub fn clear_transition_length(
             })
     };
     let step = 0.25 * r;
+    // The transition runs from the last ordinary section to the fold, so the fold must lie
+    // ahead of that section only; the sections past it are ordinary ones and need only be
+    // clear. A branch that curls back past the junction's level (palabos_cerebral_aneurysm: an
+    // outlet leaving a sac 14 mm in radius turns back down by 30 mm) puts the spine's ends
+    // behind its later sections, which asked of them too left no section anywhere.
+    let last_section = |d: f64| {
+        fold_ahead(d)
+            && (0..=CLEAR_RUN_STEPS).map(|k| d + k as f64 * step).filter(|&x| x == d || x <= run_reach).all(clear)
+    };
     let mut d = estimate;
     while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len && d <= reach {
-        if (0..=CLEAR_RUN_STEPS).map(|k| d + k as f64 * step).filter(|&x| x == d || x <= run_reach).all(clear) {
+        if last_section(d) {
             return Ok(Some(d));
         }
         d += step;
@@ -525,7 +533,7 @@ pub fn clear_transition_length(
     // junction, a clear section gives a steeper transition, but a mesh.
     let mut d = reach;
     while setup.steep_short_branches && estimate > reach && d >= NEAREST_SECTION * r {
-        if (0..=CLEAR_RUN_STEPS).map(|k| d + k as f64 * step).filter(|&x| x == d || x <= run_reach).all(clear) {
+        if last_section(d) {
             return Ok(Some(d));
         }
         d -= step;

@@ -16,8 +16,12 @@ use std::time::Instant;
 
 /// The cases meshed within every bar (minimum scaled Jacobian 0.2, wall mean 0.85, lumen skew
 /// 0.35, every face pyramid positive) at both presets; a change that loses one fails here.
-const WITHIN_BARS: [&str; 14] = [
+/// palabos_cerebral_aneurysm, whose sac holds the bifurcation, is meshed with the sac as the
+/// junction (it was refused: its outlets curl back past the junction, and its branches leave it
+/// like the legs of a tripod).
+const WITHIN_BARS: [&str; 15] = [
     "vmtk_aortoiliac",
+    "palabos_cerebral_aneurysm",
     "vmtk_abdominal_aorta_segment",
     "aneurisk_C0092_ica_segment",
     "gmsh_carotid_bifurcation",
