@@ -357,6 +357,7 @@ fn push_element(mesh: &mut VesselMesh, hex: Hex, branch: u32) -> u32 {
     mesh.hexes.push(hex);
     mesh.regions.push(Region::Extension);
     mesh.branch_of.push(branch);
+    mesh.sac.push(false);
     let corners = mesh.corners(e as usize);
     mesh.triads.push(element_triad(&corners));
     mesh.fibres.push([Vector3::zeros(); 2]);
@@ -392,6 +393,7 @@ pub fn without_extensions(mesh: &VesselMesh) -> Cow<'_, VesselMesh> {
         hexes: mesh.hexes[..elements].to_vec(),
         regions: mesh.regions[..elements].to_vec(),
         branch_of: mesh.branch_of[..elements].to_vec(),
+        sac: mesh.sac[..elements].to_vec(),
         triads: mesh.triads[..elements].to_vec(),
         fibres: mesh.fibres[..elements].to_vec(),
         quality: mesh.quality[..elements].to_vec(),
@@ -439,6 +441,7 @@ pub fn fluid_view(mesh: &VesselMesh) -> Cow<'_, VesselMesh> {
         hexes: elements.iter().map(|&e| mesh.hexes[e]).collect(),
         regions: elements.iter().map(|&e| mesh.regions[e]).collect(),
         branch_of: elements.iter().map(|&e| mesh.branch_of[e]).collect(),
+        sac: elements.iter().map(|&e| mesh.sac[e]).collect(),
         triads: elements.iter().map(|&e| mesh.triads[e]).collect(),
         fibres: elements.iter().map(|&e| mesh.fibres[e]).collect(),
         quality: elements.iter().map(|&e| mesh.quality[e]).collect(),

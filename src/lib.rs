@@ -30,6 +30,7 @@ pub mod quality;
 pub mod refinement;
 pub mod report;
 pub mod resources;
+pub mod sacs;
 pub mod surface;
 pub mod surface_smoothing;
 pub mod synthetic;

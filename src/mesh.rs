@@ -208,6 +208,9 @@ pub struct VesselMesh {
     pub regions: Vec<Region>,
     /// Branch index of each element (0 for an unbranched vessel).
     pub branch_of: Vec<u32>,
+    /// Whether each element lies in a saccular aneurysm's sac: a sac meshed as a blind branch
+    /// (see [`is_sac`]), or the part of a junction that a sac holds (see [`crate::sacs`]).
+    pub sac: Vec<bool>,
     /// Per element local frame (lumen elements too: radial from the centerline side to the wall).
     pub triads: Vec<Triad>,
     /// Per element the two collagen fibre directions (zero vectors for lumen elements).
@@ -254,9 +257,9 @@ impl VesselMesh {
         }
         nodes
     }
-    /// Whether element `e` lies in a saccular aneurysm's sac (see [`is_sac`]).
+    /// Whether element `e` lies in a saccular aneurysm's sac (see [`VesselMesh::sac`]).
     pub fn in_sac(&self, e: usize) -> bool {
-        is_sac(&self.branch_names[self.branch_of[e] as usize])
+        self.sac[e]
     }
     /// Corner coordinates of element `e`.
     pub fn corners(&self, e: usize) -> [Point3<f64>; 8] {
@@ -291,6 +294,7 @@ impl VesselMesh {
             + bytes(&self.hexes)
             + bytes(&self.regions)
             + bytes(&self.branch_of)
+            + bytes(&self.sac)
             + bytes(&self.triads)
             + bytes(&self.fibres)
             + bytes(&self.quality)

@@ -777,6 +777,7 @@ pub fn mesh_tree(
 
     progress.stage("annotation");
     annotate(&mut mesh);
+    crate::sacs::mark_junction_sacs(&mut mesh, &junction_of, &junctions, &tree);
     if let Some((e, q)) =
         mesh.quality.iter().enumerate().find(|(_, q)| q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0)
     {
@@ -1125,6 +1126,12 @@ fn build_report(
                 pages_moved: meshed.junction_variant.optimisation.move_pages,
                 surface_smoothed: meshed.junction_variant.optimisation.smooth_surface,
                 elements: elements.len(),
+                // A sac branch's transition is the junction's too, but the sac is the branch's.
+                sac_elements: if crate::sacs::holds_sac(g) {
+                    elements.iter().filter(|&&e| mesh.sac[e]).count()
+                } else {
+                    0
+                },
                 scaled_jacobian: Stats::of(elements.iter().map(|&e| mesh.quality[e].scaled_jacobian)),
                 lumen_equiangle_skew: Stats::of(
                     elements.iter().filter(|&&e| !mesh.regions[e].is_wall()).map(|&e| mesh.quality[e].equiangle_skew),

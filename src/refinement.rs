@@ -202,6 +202,7 @@ fn split(mesh: &VesselMesh, k: usize) -> (VesselMesh, Vec<OnCoarse>) {
         hexes,
         regions: mesh.regions.iter().flat_map(|r| std::iter::repeat_n(*r, cubes)).collect(),
         branch_of: mesh.branch_of.iter().flat_map(|b| std::iter::repeat_n(*b, cubes)).collect(),
+        sac: mesh.sac.iter().flat_map(|s| std::iter::repeat_n(*s, cubes)).collect(),
         triads: Vec::new(),
         fibres: Vec::new(),
         quality: Vec::new(),

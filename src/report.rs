@@ -77,6 +77,9 @@ pub struct JunctionReport {
     /// the finishes as projected are short of a bar).
     pub surface_smoothed: bool,
     pub elements: usize,
+    /// Elements (lumen and wall) in the sac of a saccular aneurysm that holds the junction (0
+    /// where none does; see docs/guide/outputs.md).
+    pub sac_elements: usize,
     pub scaled_jacobian: Stats,
     pub lumen_equiangle_skew: Stats,
 }

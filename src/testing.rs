@@ -168,7 +168,7 @@ pub fn join_disjoint(parts: Vec<VesselMesh>) -> VesselMesh {
     }
     // New element index of every part's elements: region-major, then part.
     let mut new_index: Vec<Vec<u32>> = parts.iter().map(|p| vec![0; p.hexes.len()]).collect();
-    let (mut hexes, mut regions, mut branch_of) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut hexes, mut regions, mut branch_of, mut sac) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut triads, mut fibres, mut quality) = (Vec::new(), Vec::new(), Vec::new());
     let mut branch_offset = Vec::with_capacity(parts.len());
     let mut branch_names = Vec::new();
@@ -183,6 +183,7 @@ pub fn join_disjoint(parts: Vec<VesselMesh>) -> VesselMesh {
                 hexes.push(p.hexes[e].map(|n| n + node_offset[k]));
                 regions.push(region);
                 branch_of.push(p.branch_of[e] + branch_offset[k]);
+                sac.push(p.sac[e]);
                 triads.push(p.triads[e]);
                 fibres.push(p.fibres[e]);
                 quality.push(p.quality[e]);
@@ -233,6 +234,7 @@ pub fn join_disjoint(parts: Vec<VesselMesh>) -> VesselMesh {
         hexes,
         regions,
         branch_of,
+        sac,
         triads,
         fibres,
         quality,

@@ -152,11 +152,13 @@ pub fn build_volume(
         v.sort_unstable();
     }
 
+    let sac = branch_of.iter().map(|&b| crate::mesh::is_sac(&inputs.branch_names[b as usize])).collect();
     let mesh = VesselMesh {
         nodes,
         hexes,
         regions,
         branch_of,
+        sac,
         triads: Vec::new(),
         fibres: Vec::new(),
         quality: Vec::new(),

@@ -56,6 +56,10 @@ const SURFACE_LEFT_OUT: [&str; 0] = [];
 /// and an end of kind `sac` in `report.json`, meshed.
 const SACS: [&str; 1] = ["gmsh_cerebral_aneurysm"];
 
+/// The cases whose sac holds a junction (a bifurcation aneurysm), meshed as that junction: its
+/// elements in the sac are counted in `report.json` (`sac_elements`), and no other junction's.
+const SAC_JUNCTIONS: [&str; 1] = ["palabos_cerebral_aneurysm"];
+
 /// The cases whose mesh stops well short of a vessel end, said by an `end_cut_short` warning:
 /// none since sections may meet a wall leaning up to 40 degrees into a dome (the voxel aorta's
 /// outlet dome was left 50 mm short).
@@ -128,6 +132,8 @@ fn cohort_at(preset: &str) {
         let sac_branch =
             report["branches"].as_array().unwrap().iter().any(|b| b["name"] == "sac" && b["outlet_end"] == "dome");
         let has_sac = sac_end && sac_branch;
+        let sac_junctions =
+            report["junctions"].as_array().unwrap().iter().filter(|j| j["sac_elements"].as_u64() > Some(0)).count();
         let checks = [
             (min_sj > 0.0, format!("an inverted element (min scaled Jacobian {min_sj:.3})")),
             (meshed == ends.len() && ends.len() >= case.ends, format!("{meshed} of {} ends meshed", ends.len())),
@@ -143,6 +149,10 @@ fn cohort_at(preset: &str) {
             ),
             (cut_short == ENDS_CUT_SHORT.contains(&case.name.as_str()), format!("end_cut_short warned: {cut_short}")),
             (has_sac == SACS.contains(&case.name.as_str()), format!("a sac meshed: {has_sac}")),
+            (
+                sac_junctions == SAC_JUNCTIONS.contains(&case.name.as_str()) as usize,
+                format!("{sac_junctions} junctions holding a sac"),
+            ),
         ];
         failures.extend(checks.into_iter().filter(|c| !c.0).map(|c| format!("{}: {}", case.name, c.1)));
         if tree && foam {

@@ -127,3 +127,69 @@ fn calculix_inflates_a_domed_sac() {
     assert!(refused.to_string().contains("no outlet"), "{refused}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A sac that holds a junction (palabos_cerebral_aneurysm: a bifurcation aneurysm, whose
+/// centerlines run through the sac) is meshed as the junction and marked as the sac: elements of
+/// that junction only, near its centre, lumen and the wall stacked on it, the dome's wall
+/// included, and no element of the vessels past it.
+#[test]
+fn a_sac_holding_a_junction_is_its_own_region() {
+    use vesselhex::centerline_extract::ExtractOptions;
+    use vesselhex::input::read_surface;
+    use vesselhex::mesh::{face_nodes, FACE_INNER, FACE_OUTER};
+    use vesselhex::pipeline::{mesh_surface, CenterlineSource, MeshSettings};
+    use vesselhex::units::LengthUnit;
+    let Some(vessels) = common::vessels_dir() else { return };
+    let surface = read_surface(&vessels.join("palabos_cerebral_aneurysm/aneurysm.stl"), LengthUnit::M).unwrap();
+    let settings = MeshSettings {
+        config: MeshConfig::preset(Preset::Coarse),
+        centerline_units: None,
+        max_memory: vesselhex::resources::default_max_memory(),
+        warnings: vec![],
+    };
+    let vessel = mesh_surface(
+        surface,
+        CenterlineSource::Extract(ExtractOptions::default()),
+        settings,
+        &mut Progress::new(true, 9),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let Meshed { mesh, junctions, junction_of, .. } = &vessel.meshed;
+    let holding: Vec<_> = junctions.iter().filter(|j| vesselhex::sacs::holds_sac(j)).collect();
+    assert_eq!(holding.len(), 1, "one junction holds the sac");
+    let j = holding[0];
+    let sac: Vec<usize> = (0..mesh.hexes.len()).filter(|&e| mesh.in_sac(e)).collect();
+    let centroid = |e: usize| mesh.corners(e).iter().map(|c| c.coords).sum::<nalgebra::Vector3<f64>>() / 8.0;
+    let farthest = sac.iter().map(|&e| (centroid(e) - j.centre.coords).norm()).fold(0.0, f64::max);
+    let lumen = sac.iter().filter(|&&e| mesh.regions[e] == Region::Lumen).count();
+    println!(
+        "palabos sac: {} lumen + {} wall elements of the junction's {}, farthest {:.1} mm from its centre (radius {:.1})",
+        lumen,
+        sac.len() - lumen,
+        junction_of.iter().filter(|&&x| x == Some(j.index)).count(),
+        farthest,
+        j.radius
+    );
+    assert!(sac.iter().all(|&e| junction_of[e] == Some(j.index)), "a sac element outside the junction");
+    assert!(lumen >= 200, "{lumen} lumen elements in a sac 17 mm in radius");
+    assert!(farthest <= 1.5 * j.radius, "a sac element {farthest:.1} mm from the centre");
+    // The wall over the sac, and only that: a wall element is in the sac exactly when the
+    // element it stands on is.
+    let key = |mut q: [u32; 4]| {
+        q.sort_unstable();
+        q
+    };
+    let below: std::collections::HashMap<[u32; 4], usize> = (0..mesh.hexes.len())
+        .filter(|&e| mesh.regions[e] != Region::Extension)
+        .map(|e| (key(face_nodes(&mesh.hexes[e], FACE_OUTER)), e))
+        .collect();
+    let mut wall = [0usize; 3];
+    for e in mesh.wall_range() {
+        let under = below[&key(face_nodes(&mesh.hexes[e], FACE_INNER))];
+        assert_eq!(mesh.in_sac(e), mesh.in_sac(under), "wall element {e} over element {under}");
+        if mesh.in_sac(e) {
+            wall[mesh.regions[e] as usize - 1] += 1;
+        }
+    }
+    assert!(wall[0] > 0 && wall.iter().all(|&n| n == wall[0]), "sac wall elements per layer: {wall:?}");
+}
