@@ -11,7 +11,7 @@
 use crate::centerline::CenterlineTree;
 use crate::junction::JunctionGeometry;
 use crate::mesh::{face_nodes, VesselMesh, FACE_INNER, FACE_OUTER};
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use std::collections::HashMap;
 
 /// A junction holds a sac when its largest inscribed ball is at least this many times as wide
@@ -40,6 +40,18 @@ fn distance_to_polyline(p: &Point3<f64>, points: &[Point3<f64>]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// A branch's own tube at a junction: its radius where it leaves, about its centerline.
+struct Tube {
+    centerline: Vec<Point3<f64>>,
+    radius: f64,
+}
+
+impl Tube {
+    fn holds(&self, p: &Point3<f64>) -> bool {
+        distance_to_polyline(p, &self.centerline) <= self.radius
+    }
+}
+
 /// Marks the elements of the sacs that junctions hold in `mesh.sac` (`junction_of`: each
 /// element's junction, as built): a lumen element of such a junction whose centroid lies
 /// outside every one of its branches' tubes, and the wall elements stacked on a marked one.
@@ -49,27 +61,30 @@ pub fn mark_junction_sacs(
     junctions: &[JunctionGeometry],
     tree: &CenterlineTree,
 ) {
-    let holding: Vec<&JunctionGeometry> = junctions.iter().filter(|j| holds_sac(j)).collect();
-    if holding.is_empty() {
-        return;
-    }
-    let tubes: Vec<(usize, Vec<(Vec<Point3<f64>>, f64)>)> = holding
+    // Each junction's branch tubes, for the junctions that hold a sac.
+    let tubes_of: HashMap<usize, Vec<Tube>> = junctions
         .iter()
+        .filter(|j| holds_sac(j))
         .map(|j| {
             let tubes = j
                 .slots
                 .iter()
-                .map(|s| (tree.branches[s.branch].samples.iter().map(|x| x.point).collect(), s.radius))
+                .map(|s| Tube {
+                    centerline: tree.branches[s.branch].samples.iter().map(|x| x.point).collect(),
+                    radius: s.radius,
+                })
                 .collect();
             (j.index, tubes)
         })
         .collect();
+    if tubes_of.is_empty() {
+        return;
+    }
     let mut marked = Vec::new();
     for e in mesh.lumen_range() {
-        let Some((_, tubes)) = tubes.iter().find(|(j, _)| junction_of[e] == Some(*j)) else { continue };
-        let corners = mesh.corners(e);
-        let centroid = Point3::from(corners.iter().map(|c| c.coords).sum::<nalgebra::Vector3<f64>>() / 8.0);
-        if tubes.iter().all(|(line, r)| distance_to_polyline(&centroid, line) > *r) {
+        let Some(tubes) = junction_of[e].and_then(|j| tubes_of.get(&j)) else { continue };
+        let centroid = Point3::from(mesh.corners(e).iter().map(|c| c.coords).sum::<Vector3<f64>>() / 8.0);
+        if !tubes.iter().any(|t| t.holds(&centroid)) {
             marked.push(e);
         }
     }
