@@ -130,8 +130,7 @@ fn calculix_inflates_a_domed_sac() {
 
 /// A sac that holds a junction (palabos_cerebral_aneurysm: a bifurcation aneurysm, whose
 /// centerlines run through the sac) is meshed as the junction and marked as the sac: elements of
-/// that junction only, near its centre, lumen and the wall stacked on it, the dome's wall
-/// included, and no element of the vessels past it.
+/// that junction only, within 1.5 of its radii of its centre, lumen and the wall stacked on it.
 #[test]
 fn a_sac_holding_a_junction_is_its_own_region() {
     use vesselhex::centerline_extract::ExtractOptions;
