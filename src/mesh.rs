@@ -315,6 +315,17 @@ pub fn element_centre(corners: &[Point3<f64>; 8]) -> Point3<f64> {
     Point3::from(corners.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / 8.0)
 }
 
+/// Closest point of the segment [a, b] to p (a, for a segment of no length).
+pub fn closest_on_segment(p: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> Point3<f64> {
+    let ab = b - a;
+    let len2 = ab.norm_squared();
+    if len2 == 0.0 {
+        return *a;
+    }
+    let t = ((p - a).dot(&ab) / len2).clamp(0.0, 1.0);
+    a + ab * t
+}
+
 /// Centre of face `f` of an element given its corners.
 pub fn face_centre(corners: &[Point3<f64>; 8], f: usize) -> Point3<f64> {
     let t = HEX_FACES[f];

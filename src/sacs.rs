@@ -10,7 +10,7 @@
 
 use crate::centerline::CenterlineTree;
 use crate::junction::JunctionGeometry;
-use crate::mesh::{face_nodes, VesselMesh, FACE_INNER, FACE_OUTER};
+use crate::mesh::{closest_on_segment, face_nodes, VesselMesh, FACE_INNER, FACE_OUTER};
 use nalgebra::{Point3, Vector3};
 use std::collections::HashMap;
 
@@ -30,14 +30,7 @@ fn distance_to_polyline(p: &Point3<f64>, points: &[Point3<f64>]) -> f64 {
     if points.len() == 1 {
         return (p - points[0]).norm();
     }
-    points
-        .windows(2)
-        .map(|w| {
-            let d = w[1] - w[0];
-            let t = if d.norm_squared() > 0.0 { ((p - w[0]).dot(&d) / d.norm_squared()).clamp(0.0, 1.0) } else { 0.0 };
-            (p - (w[0] + d * t)).norm()
-        })
-        .fold(f64::INFINITY, f64::min)
+    points.windows(2).map(|w| (p - closest_on_segment(p, &w[0], &w[1])).norm()).fold(f64::INFINITY, f64::min)
 }
 
 /// A branch's own tube at a junction: its radius where it leaves, about its centerline.

@@ -49,6 +49,7 @@
 use crate::centerline_extract::write_vtp;
 use crate::error::{Error, Result};
 use crate::input::{CenterlinePolyline, Centerlines};
+use crate::mesh::closest_on_segment;
 use crate::synthetic::write_binary_stl;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
@@ -357,17 +358,6 @@ fn check_range(what: &str, name: &str, value: f64, lo: f64, hi: f64) -> Result<(
 // ---------------------------------------------------------------------------------------------
 // Geometry helpers
 // ---------------------------------------------------------------------------------------------
-
-/// Closest point of segment [a, b] to p.
-fn closest_on_segment(p: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> Point3<f64> {
-    let ab = b - a;
-    let len2 = ab.norm_squared();
-    if len2 == 0.0 {
-        return *a;
-    }
-    let t = ((p - a).dot(&ab) / len2).clamp(0.0, 1.0);
-    a + ab * t
-}
 
 /// Distance between segments [p0, p1] and [q0, q1]: the distance between the lines' closest
 /// points when both fall inside, else the smallest endpoint-to-segment distance (exact for

@@ -48,7 +48,7 @@ use super::text::{write_binary, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::config::{FoamSolver, InletProfile, OpenFoamConfig};
 use crate::error::{Error, Result};
-use crate::mesh::{face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh, HEX_FACES};
+use crate::mesh::{closest_on_segment, face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh, HEX_FACES};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use std::io::Write;
@@ -841,12 +841,6 @@ pub struct Inflow {
     pub velocities: Vec<Vector3<f64>>,
 }
 
-fn point_segment_distance(p: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> f64 {
-    let ab = b - a;
-    let t = ((p - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
-    (p - (a + ab * t)).norm()
-}
-
 /// Per-face inlet velocities. Parabolic: u = u0 rho (2 - rho), rho = d / d_max with d the
 /// distance of the face centre to the boundary of the inlet section (its edges used by one
 /// inlet face only) and d_max the largest such distance over face centres and points (on a circle
@@ -881,7 +875,9 @@ pub fn inlet_velocities(poly: &PolyMesh, inlet: &Patch, config: &OpenFoamConfig)
             }
             let dist = |p: &Point3<f64>| {
                 rim.iter()
-                    .map(|&(a, b)| point_segment_distance(p, &poly.points[a as usize], &poly.points[b as usize]))
+                    .map(|&(a, b)| {
+                        (p - closest_on_segment(p, &poly.points[a as usize], &poly.points[b as usize])).norm()
+                    })
                     .fold(f64::INFINITY, f64::min)
             };
             let d: Vec<f64> = faces.clone().map(|f| dist(&poly.face_centre(f))).collect();
