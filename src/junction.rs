@@ -341,8 +341,10 @@ fn spine_axis(dirs: &[Vector3<f64>]) -> (Vector3<f64>, f64) {
             }
         }
     }
-    let best_of = |candidates: &mut dyn Iterator<Item = &Vector3<f64>>| {
-        candidates.map(|c| (*c, axis_gap(dirs, c))).fold(None, |best: Option<(Vector3<f64>, f64)>, (c, g)| match best {
+    // Each candidate with its smallest gap; the best of some, the first of equals.
+    let scored: Vec<(Vector3<f64>, f64)> = candidates.iter().map(|c| (*c, axis_gap(dirs, c))).collect();
+    let best_of = |scored: &mut dyn Iterator<Item = &(Vector3<f64>, f64)>| {
+        scored.fold(None, |best: Option<(Vector3<f64>, f64)>, &(c, g)| match best {
             Some(b) if g <= b.1 + 1e-9 => Some(b),
             _ => Some((c, g)),
         })
@@ -351,15 +353,13 @@ fn spine_axis(dirs: &[Vector3<f64>]) -> (Vector3<f64>, f64) {
     let acceptable = |(a, gap): &(Vector3<f64>, f64)| {
         gap.to_degrees() >= MIN_ANGULAR_GAP_DEG && dirs.iter().all(|d| (d - a * d.dot(a)).norm() >= clearance)
     };
-    let best = best_of(&mut candidates.iter()).expect("the best-fit plane's normal is a candidate");
+    let best = best_of(&mut scored.iter()).expect("the best-fit plane's normal is a candidate");
     if acceptable(&best) {
         return best;
     }
     let mean: Vector3<f64> = dirs.iter().sum();
     let by_mean = (mean.norm() > 1e-6).then(|| (mean.normalize(), axis_gap(dirs, &mean.normalize())));
-    best_of(&mut candidates.iter().filter(|c| acceptable(&(**c, axis_gap(dirs, c)))))
-        .or(by_mean.filter(acceptable))
-        .unwrap_or(best)
+    best_of(&mut scored.iter().filter(|s| acceptable(s))).or(by_mean.filter(acceptable)).unwrap_or(best)
 }
 
 fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface) -> Result<JunctionGeometry> {
