@@ -75,7 +75,7 @@ pub fn element_penalty(c: &[Point3<f64>; 8], size: f64, validity: Validity) -> f
 /// exactly, those that do not move skipped; the pyramids' (a sum over faces through the cell's
 /// centre) by forward differences of step `step`. A node's gradient costs about one evaluation
 /// of its elements' penalties, where forward differences of the whole penalty cost three.
-pub fn element_penalty_and_gradient(
+fn element_penalty_and_gradient(
     c: &[Point3<f64>; 8],
     size: f64,
     validity: Validity,
