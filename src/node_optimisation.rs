@@ -57,24 +57,15 @@ pub enum Freedom {
 /// `validity` asks, its face pyramids'. `size` is a length of the element, fixed while it is
 /// optimised (the centroid term's axes span twice the element, so they count a quarter).
 pub fn element_penalty(c: &[Point3<f64>; 8], size: f64, validity: Validity) -> f64 {
-    let volume = size * size * size;
-    let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
-    let [(ap, am), (bp, bm), (dp, dm)] = CENTROID_AXES;
-    let mut total = term(sum(ap) - sum(am), sum(bp) - sum(bm), sum(dp) - sum(dm), volume * 64.0, false).0;
-    for (i, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
-        total += term(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i], volume, false).0;
-    }
-    match validity {
-        Validity::Corners => total,
-        Validity::CornersAndPyramids => total + pyramid_penalty(c),
-    }
+    element_penalty_and_gradient(c, size, validity, 0, 0.0).0
 }
 
 /// [`element_penalty`] and its gradient with respect to the corners in `corners` (a bit per
 /// corner: those where one node stands) moved together. The corners' terms are differentiated
 /// exactly, those that do not move skipped; the pyramids' (a sum over faces through the cell's
 /// centre) by forward differences of step `step`. A node's gradient costs about one evaluation
-/// of its elements' penalties, where forward differences of the whole penalty cost three.
+/// of its elements' penalties, where forward differences of the whole penalty cost three. With
+/// no corner moved, the penalty alone (its gradient zero).
 fn element_penalty_and_gradient(
     c: &[Point3<f64>; 8],
     size: f64,
@@ -86,7 +77,7 @@ fn element_penalty_and_gradient(
     let moved = |k: usize| corners & (1 << k) != 0;
     let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
     let [(ap, am), (bp, bm), (dp, dm)] = CENTROID_AXES;
-    let (mut total, axes) = term(sum(ap) - sum(am), sum(bp) - sum(bm), sum(dp) - sum(dm), volume * 64.0, true);
+    let (mut total, axes) = term(sum(ap) - sum(am), sum(bp) - sum(bm), sum(dp) - sum(dm), volume * 64.0, corners != 0);
     let mut gradient = Vector3::zeros();
     for k in (0..8).filter(|&k| moved(k)) {
         for (g, (plus, _)) in axes.iter().zip(&CENTROID_AXES) {
@@ -109,7 +100,7 @@ fn element_penalty_and_gradient(
     if validity == Validity::CornersAndPyramids {
         let p0 = pyramid_penalty(c);
         total += p0;
-        for axis in 0..3 {
+        for axis in (0..3).filter(|_| corners != 0) {
             let mut shifted = *c;
             for (k, p) in shifted.iter_mut().enumerate() {
                 if moved(k) {
