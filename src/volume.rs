@@ -103,8 +103,11 @@ pub fn build_volume(
     let quads = lumen_surface_quads(projected, &numbering);
     let graph = SurfaceGraph::new(&quads, lumen.nodes.len());
     let LumenNodes { mut nodes, radius, in_junction, ray, movable, poor_mobility, smoothed_columns, .. } = lumen;
+    let ends = vessel_end_names(projected);
+    let mut elements = Elements::new(&ends);
+    add_lumen_elements(&mut elements, projected, &numbering, levels, &ends);
     if optimisation.smooth_surface {
-        smooth_transition_surface(&mut nodes, smoothed_columns, &graph, surface);
+        smooth_transition_surface(&mut nodes, smoothed_columns, &graph, &quads, &elements.hexes, surface);
     }
     // The wall nodes' ids now; their places once the junction optimisation has settled the surface.
     numbering.add_wall_nodes(&mut nodes, &graph.nodes, levels);
@@ -119,9 +122,6 @@ pub fn build_volume(
         numbering: &numbering,
     };
 
-    let ends = vessel_end_names(projected);
-    let mut elements = Elements::new(&ends);
-    add_lumen_elements(&mut elements, projected, &numbering, levels, &ends);
     let by_corners = vec![Validity::Corners; elements.hexes.len()];
     improve_junction_nodes(&mut nodes, &elements.hexes, &movable, surface, optimisation.pattern_search, &by_corners);
     // The lumen is OpenFOAM's mesh: its poor elements are judged with the face pyramids too, and
@@ -185,18 +185,47 @@ fn smooth_transition_surface(
     nodes: &mut [Point3<f64>],
     mut columns: IndexMap<u32, Vec<RayNode>>,
     graph: &SurfaceGraph,
+    quads: &[[u32; 4]],
+    lumen: &[Hex],
     surface: &LumenSurface,
 ) {
+    let mut quads_of: HashMap<u32, Vec<[u32; 4]>> = HashMap::new();
+    for q in quads {
+        for &n in q {
+            if columns.contains_key(&n) {
+                quads_of.entry(n).or_default().push(*q);
+            }
+        }
+    }
+    // The lumen elements each smoothed node moves: those of the node and of its column.
+    let mut mover_of: HashMap<u32, u32> = HashMap::new();
+    for (&node, column) in &columns {
+        mover_of.insert(node, node);
+        for r in column {
+            mover_of.insert(r.node, node);
+        }
+    }
+    let mut elements_of: HashMap<u32, Vec<u32>> = HashMap::new();
+    for (e, h) in lumen.iter().enumerate() {
+        let mut movers: Vec<u32> = h.iter().filter_map(|n| mover_of.get(n).copied()).collect();
+        movers.sort_unstable();
+        movers.dedup();
+        for m in movers {
+            elements_of.entry(m).or_default().push(e as u32);
+        }
+    }
     // In node order, so the Gauss-Seidel passes do not depend on the branches' order.
     columns.sort_keys();
     let smoothed: Vec<SmoothedNode> = columns
         .into_iter()
         .map(|(node, column)| {
             let around = &graph.neighbours[graph.position[node as usize]];
-            SmoothedNode { node, neighbours: around.iter().map(|&j| graph.nodes[j]).collect(), column }
+            let neighbours = around.iter().map(|&j| graph.nodes[j]).collect();
+            let quads = quads_of.remove(&node).unwrap_or_default();
+            SmoothedNode { node, neighbours, quads, elements: elements_of.remove(&node).unwrap_or_default(), column }
         })
         .collect();
-    smooth_on_surface(nodes, &smoothed, surface);
+    smooth_on_surface(nodes, &smoothed, lumen, surface);
 }
 
 /// How the wall is laid over the lumen surface: along which direction and how thick at every
