@@ -103,6 +103,7 @@ pub fn build_volume(
     let quads = lumen_surface_quads(projected, &numbering);
     let graph = SurfaceGraph::new(&quads, lumen.nodes.len());
     let LumenNodes { mut nodes, radius, in_junction, ray, movable, poor_mobility, smoothed_columns, .. } = lumen;
+    // The lumen's elements before the smoothing, which keeps them valid.
     let ends = vessel_end_names(projected);
     let mut elements = Elements::new(&ends);
     add_lumen_elements(&mut elements, projected, &numbering, levels, &ends);
