@@ -124,25 +124,32 @@ fn place(nodes: &mut [Point3<f64>], s: &SmoothedNode, p: Point3<f64>) {
     }
 }
 
-/// The shortfall of a quad's corners from right angles: the sum over its corners of one minus
-/// the corner's sine (signed about the quad's normal), squared. A wall element grown from the
-/// quad has about its worst corner's sine as scaled Jacobian.
-fn corner_shortfall(q: &[Point3<f64>; 4]) -> f64 {
-    let normal = (q[2] - q[0]).cross(&(q[3] - q[1]));
+/// The sines of a quad's corners, signed about its normal (`mesh::quad_area_vector`): a wall
+/// element grown from the quad has about its worst corner's sine as scaled Jacobian. A corner
+/// with an edge of no length, or a quad with no area, counts as flat (0).
+fn corner_sines(q: &[Point3<f64>; 4]) -> [f64; 4] {
+    let normal = crate::mesh::quad_area_vector(*q);
     let n = normal.norm();
     if n <= f64::MIN_POSITIVE {
-        return 4.0;
+        return [0.0; 4];
     }
     let normal = normal / n;
-    (0..4)
-        .map(|i| {
-            let a = q[(i + 1) % 4] - q[i];
-            let b = q[(i + 3) % 4] - q[i];
-            let l = a.norm() * b.norm();
-            let sine = if l <= f64::MIN_POSITIVE { 0.0 } else { a.cross(&b).dot(&normal) / l };
-            (1.0 - sine) * (1.0 - sine)
-        })
-        .sum()
+    std::array::from_fn(|i| {
+        let a = q[(i + 1) % 4] - q[i];
+        let b = q[(i + 3) % 4] - q[i];
+        let l = a.norm() * b.norm();
+        if l <= f64::MIN_POSITIVE {
+            0.0
+        } else {
+            a.cross(&b).dot(&normal) / l
+        }
+    })
+}
+
+/// The shortfall of a quad's corners from right angles: the sum over its corners of one minus
+/// the corner's sine, squared.
+fn corner_shortfall(q: &[Point3<f64>; 4]) -> f64 {
+    corner_sines(q).iter().map(|sine| (1.0 - sine) * (1.0 - sine)).sum()
 }
 
 /// What the shape optimisation lowers around a smoothed node: its quads' corner shortfalls
@@ -294,16 +301,7 @@ mod tests {
 
     /// The least corner sine of the quads around a node.
     fn least_sine(nodes: &[Point3<f64>], quads: &[[u32; 4]]) -> f64 {
-        let mut least = f64::INFINITY;
-        for q in quads {
-            let c = q.map(|n| nodes[n as usize]);
-            let normal = (c[2] - c[0]).cross(&(c[3] - c[1])).normalize();
-            for i in 0..4 {
-                let (a, b) = (c[(i + 1) % 4] - c[i], c[(i + 3) % 4] - c[i]);
-                least = least.min(a.cross(&b).dot(&normal) / (a.norm() * b.norm()));
-            }
-        }
-        least
+        quads.iter().flat_map(|q| corner_sines(&q.map(|n| nodes[n as usize]))).fold(f64::INFINITY, f64::min)
     }
 
     /// A node pushed diagonally across its four quads (sheared to a corner sine below 0.85) is
