@@ -4,7 +4,9 @@
 //!   eight corners, the determinant of the three unit edge vectors leaving the corner in
 //!   right-handed order ([`HEX_CORNER_NEIGHBOURS`]), and at the centroid the determinant of the
 //!   three normalised principal axes (differences of opposite face sums); the element's value is
-//!   the minimum of the nine. 1 for a cube, <= 0 for an inverted or degenerate element. FEA
+//!   the minimum of the nine; a corner with an edge collapsed next to its others counts 0, where
+//!   Verdict would see a sound corner ([`COLLAPSED_EDGE`]). 1 for a cube, <= 0 for an inverted or
+//!   degenerate element. FEA
 //!   practice asks for a mean above 0.8 (De Santis et al. 2011 report 0.81-0.90 for walls).
 //! * **Equi-angle skew**: over the 24 corner angles theta of the six faces,
 //!   max((theta_max - 90) / 90, (90 - theta_min) / 90). 0 for a cube, 1 for a degenerate element;
@@ -28,6 +30,14 @@ impl Bars {
 use crate::mesh::{ElementQuality, HEX_CORNER_NEIGHBOURS, HEX_FACES};
 use nalgebra::{Point3, Vector3};
 
+/// A corner whose shortest edge is at most this share of its longest counts as collapsed (scaled
+/// Jacobian 0), where Verdict would divide the edges out and see a sound corner: a wall column
+/// squeezed to nothing in an acute crotch (the synthetic T at 30 degrees and 4:1, whose
+/// transition once left two surface nodes and their wall columns within 1e-8 mm of one another,
+/// every corner's scaled Jacobian about 0.2). A wall layer's thinnest cells are some 1e-2 of
+/// their length, a boundary layer's first cell rarely below 1e-4.
+const COLLAPSED_EDGE: f64 = 1e-6;
+
 /// Scaled Jacobian of a hexahedron given its eight corners in canonical order.
 pub fn scaled_jacobian(c: &[Point3<f64>; 8]) -> f64 {
     scaled_jacobian_unless_below(c, f64::NEG_INFINITY)
@@ -37,11 +47,13 @@ pub fn scaled_jacobian(c: &[Point3<f64>; 8]) -> f64 {
 /// as soon as one corner reaches it (an optimiser that only asks "better than?" stops early).
 pub fn scaled_jacobian_unless_below(c: &[Point3<f64>; 8], floor: f64) -> f64 {
     let det_unit = |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>| {
-        let l = a.norm() * b.norm() * d.norm();
-        if l <= f64::MIN_POSITIVE {
+        let lengths = [a.norm(), b.norm(), d.norm()];
+        let (shortest, longest) =
+            (lengths[0].min(lengths[1]).min(lengths[2]), lengths[0].max(lengths[1]).max(lengths[2]));
+        if shortest <= COLLAPSED_EDGE * longest || shortest <= f64::MIN_POSITIVE {
             0.0
         } else {
-            a.cross(&b).dot(&d) / l
+            a.cross(&b).dot(&d) / (lengths[0] * lengths[1] * lengths[2])
         }
     };
     let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
@@ -346,5 +358,22 @@ pub(crate) mod tests {
             p.z = -p.z;
         }
         assert!(scaled_jacobian(&m) < 0.0);
+    }
+
+    /// A wall column squeezed to nothing: the top face's corners 0 and 1 come down to within a
+    /// hair of the bottom's. Verdict divides the edge lengths out and sees a sound wedge; here
+    /// the element is degenerate, while a thin slab (1e-4 of its length) stays perfect.
+    #[test]
+    fn a_collapsed_edge_makes_a_degenerate_element() {
+        let mut c = crate::mesh::unit_cube();
+        for i in [4, 5] {
+            c[i].z = 1e-9;
+        }
+        assert_eq!(scaled_jacobian(&c), 0.0);
+        let mut slab = crate::mesh::unit_cube();
+        for p in slab[4..].iter_mut() {
+            p.z = 1e-4;
+        }
+        assert!((scaled_jacobian(&slab) - 1.0).abs() < 1e-12);
     }
 }
