@@ -6,8 +6,8 @@
 //!   three normalised principal axes (differences of opposite face sums); the element's value is
 //!   the minimum of the nine; a corner with an edge collapsed next to its others counts 0, where
 //!   Verdict would see a sound corner ([`COLLAPSED_EDGE`]). 1 for a cube, <= 0 for an inverted or
-//!   degenerate element. FEA
-//!   practice asks for a mean above 0.8 (De Santis et al. 2011 report 0.81-0.90 for walls).
+//!   degenerate element. FEA practice asks for a mean above 0.8 (De Santis et al. 2011 report
+//!   0.81-0.90 for walls).
 //! * **Equi-angle skew**: over the 24 corner angles theta of the six faces,
 //!   max((theta_max - 90) / 90, (90 - theta_min) / 90). 0 for a cube, 1 for a degenerate element;
 //!   CFD practice asks for a mean below 0.4.

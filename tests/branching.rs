@@ -275,10 +275,9 @@ fn synthetic_junction_sweep() {
     assert!(failures.len() <= MAX_SWEEP_FAILURES, "configurations below the bars or refused: {failures:?}");
 }
 
-/// Configurations of the sweep below the bars or refused today (the T at 4:1 at 30, 45 and 60
-/// degrees, the T at 2:1 at 30 degrees); the closing note lists them. A regression raises the
-/// count.
-const MAX_SWEEP_FAILURES: usize = 4;
+/// Configurations of the sweep below the bars or refused today: the T at 4:1 at 30 degrees
+/// (meshed, min scaled Jacobian 0.003). A regression raises the count.
+const MAX_SWEEP_FAILURES: usize = 1;
 
 /// Two side branches a couple of parent radii apart (as the arch's branches leave the aorta):
 /// the parent's segment between their junctions is too short for a transition and ordinary
