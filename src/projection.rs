@@ -660,11 +660,10 @@ fn transition_failure(setup: &ProjectionSetup, branch: &Branch, g: &JunctionGeom
 /// a transition into a wider junction has rings crowded against one another where the wall
 /// flares: the cerebral tree's inflow into its aneurysm (radius 1.1 -> 3.5 mm) at medium had
 /// 25 lumen cells of that transition inverted (and 2 beside it) and the tree was refused; so
-/// spaced, it meshes
-/// within the bars, and the SPHinXsys arch at coarse does too (wall mean 0.840 -> 0.860). The
-/// cap keeps a sac's surface: on palabos_cerebral_aneurysm at medium, whose sac (radius 17 mm)
-/// is its junction, the largest surface-to-mesh distance is 0.57 mm as the branch's, 0.88 mm
-/// with this cap, 1.08 mm with twice the branch's spacing.
+/// spaced, it meshes within the bars, and the SPHinXsys arch at coarse does too (wall mean
+/// 0.840 -> 0.860). The cap keeps a sac's surface: on palabos_cerebral_aneurysm at medium,
+/// whose sac (radius 17 mm) is its junction, the largest surface-to-mesh distance is 0.57 mm as
+/// the branch's, 0.88 mm with this cap, 1.08 mm with twice the branch's spacing.
 const TRANSITION_SPACING_GROWTH: f64 = 1.5;
 
 /// A transition's folded end, cast, and the core points of the sections before it.
