@@ -102,6 +102,11 @@ pub struct LumenConfig {
     pub axial_spacing: f64,
     /// Axial element length in mm; when set, replaces `axial_spacing`.
     pub axial_spacing_mm: Option<f64>,
+    /// Axial element length in a junction's transitions and in the bridges between close
+    /// junctions, relative to the local radius; unset, the spacing above. Their sections are
+    /// swept between curved folds, so thin ones cross where a plane section would not (see
+    /// `crate::pipeline::mesh_surface`, which retries at the coarse preset's spacing).
+    pub junction_axial_spacing: Option<f64>,
     /// Distance of the outer block surface (the ray targets) from the centerline, relative to
     /// the local radius. Far targets make rays nearly radial.
     pub ray_reach: f64,
@@ -117,6 +122,7 @@ impl Default for LumenConfig {
             first_cell_height: None,
             axial_spacing: 0.5,
             axial_spacing_mm: None,
+            junction_axial_spacing: None,
             ray_reach: 4.0,
         }
     }
@@ -662,6 +668,9 @@ impl MeshConfig {
         if !(l.axial_spacing >= MIN_AXIAL_SPACING && l.axial_spacing <= 10.0) {
             return bad("lumen.axial_spacing", "must be between 0.001 and 10 (relative to the radius)");
         }
+        if l.junction_axial_spacing.is_some_and(|h| !(MIN_AXIAL_SPACING..=10.0).contains(&h)) {
+            return bad("lumen.junction_axial_spacing", "must be between 0.001 and 10 (relative to the radius)");
+        }
         if let Some(h) = l.axial_spacing_mm {
             if !(h > 0.0 && h <= MAX_LENGTH_MM) {
                 return bad("lumen.axial_spacing_mm", "must be a positive length of at most 1e6 mm");
@@ -931,6 +940,15 @@ mod tests {
         c.lumen.axial_spacing = 0.0009;
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("lumen.axial_spacing"), "{e}");
+        // The junctions' own spacing has the same range, and its refusal names it.
+        c.lumen.axial_spacing = 0.3;
+        for bad in [0.0009, 0.0, 11.0, f64::NAN] {
+            c.lumen.junction_axial_spacing = Some(bad);
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains("lumen.junction_axial_spacing"), "{bad}: {e}");
+        }
+        c.lumen.junction_axial_spacing = Some(0.5);
+        c.validate().unwrap();
     }
 
     #[test]

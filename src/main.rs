@@ -45,7 +45,7 @@ Parameters come from the preset, then the case file (--config, TOML), then these
   [centerline] resample_step, smoothing_passes, radius_smoothing_passes, trim_inlet, trim_outlet,
                junction_merge_radii, inlet_mm, sacs_mm
   [lumen] core_elements, core_size, radial_elements, growth_ratio, first_cell_height, axial_spacing,
-          axial_spacing_mm, ray_reach
+          axial_spacing_mm, junction_axial_spacing, ray_reach
   [wall] thickness_ratio, thickness_mm, growth, surface, surfaces; [wall.intima] / [wall.media] /
           [wall.adventitia]: fraction, elements, fibre_angle_deg
   [extensions] ends, inlet_length, outlet_length, [extensions.length], shape, blend_length, fe_decks

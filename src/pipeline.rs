@@ -618,10 +618,13 @@ pub fn mesh_tree(
         .collect();
     let sacs = name_sacs(&mut tree, &config.centerline.sacs_mm);
     let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
+    let junction_spacing =
+        |s: &crate::centerline::CenterlineSample| l.junction_axial_spacing.map_or_else(|| spacing(s), |k| k * s.radius);
     let setup_of = |b: usize| ProjectionSetup {
         template: &templates[b],
         surface: lumen_surface,
         spacing: &spacing,
+        junction_spacing: &junction_spacing,
         trim_inlet: config.centerline.trim_inlet,
         trim_outlet: config.centerline.trim_outlet,
         normals_outward,
@@ -778,8 +781,17 @@ pub fn mesh_tree(
     progress.stage("annotation");
     annotate(&mut mesh);
     crate::sacs::mark_junction_sacs(&mut mesh, &junction_of, &junctions, &tree);
-    if let Some((e, q)) =
-        mesh.quality.iter().enumerate().find(|(_, q)| q.scaled_jacobian.is_nan() || q.scaled_jacobian <= 0.0)
+    // The worst element is named (a degenerate one first), with how many are inverted in all:
+    // the first by number can be a near miss beside a fold hundreds of elements wide.
+    let inverted = |q: f64| q.is_nan() || q <= 0.0;
+    let count = mesh.quality.iter().filter(|q| inverted(q.scaled_jacobian)).count();
+    let rank = |q: f64| if q.is_nan() { f64::NEG_INFINITY } else { q };
+    if let Some((e, q)) = mesh
+        .quality
+        .iter()
+        .enumerate()
+        .filter(|(_, q)| inverted(q.scaled_jacobian))
+        .min_by(|a, b| rank(a.1.scaled_jacobian).total_cmp(&rank(b.1.scaled_jacobian)))
     {
         let c = crate::mesh::face_centre(&mesh.corners(e), 0);
         let (place, cause) = match junction_of[e] {
@@ -795,7 +807,8 @@ pub fn mesh_tree(
             ),
         };
         return Err(Error::Geometry(format!(
-            "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm{place} is inverted (scaled Jacobian {:.3}): {cause}",
+            "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm{place} is inverted (scaled Jacobian {:.3}; {count} \
+             inverted in all): {cause}",
             surface.source.display(),
             e + 1,
             mesh.regions[e].name(),
@@ -1266,8 +1279,12 @@ pub fn mesh_surface(
     crate::finishing::scale_estimate(&mut estimate, config);
     crate::resources::check_fits(&estimate, settings.max_memory, &centerline_source)?;
     let tree_config = keep_extracted_ends(config, found_ends.as_ref());
-    let (mut meshed, centerlines) = match mesh_vessel(&surface, &centerlines, &tree_config, progress) {
-        Ok(meshed) => (meshed, centerlines),
+    let attempt = mesh_vessel_or_coarser_junctions(&surface, &centerlines, &tree_config, progress);
+    let (mut meshed, centerlines) = match attempt {
+        Ok((meshed, coarser)) => {
+            settings.warnings.extend(coarser);
+            (meshed, centerlines)
+        }
         // Sacs found on the surface never cost the vessel: refused with them, it is meshed
         // without them, and each is said not meshed (a warning, report.json's ends, exit 3).
         Err(e) if found_ends.is_some() && !tree_config.centerline.sacs_mm.is_empty() => {
@@ -1281,8 +1298,9 @@ pub fn mesh_surface(
                 centerline: crate::config::CenterlineConfig { sacs_mm: vec![], ..tree_config.centerline.clone() },
                 ..tree_config.clone()
             };
-            let meshed =
-                mesh_vessel(&surface, &centerlines, &config, progress).map_err(|e| name_winding(e, &surface))?;
+            let (meshed, coarser) = mesh_vessel_or_coarser_junctions(&surface, &centerlines, &config, progress)
+                .map_err(|e| name_winding(e, &surface))?;
+            settings.warnings.extend(coarser);
             (meshed, centerlines)
         }
         Err(e) => return Err(name_winding(e, &surface)),
@@ -1291,6 +1309,50 @@ pub fn mesh_surface(
     let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress)?;
     let (ends, inlet) = found_ends.unwrap_or_else(|| tree_ends(&meshed.tree));
     Ok(MeshedVessel { meshed, surface, centerline_source, centerlines, ends, inlet, hygiene, additions, settings })
+}
+
+/// The coarse preset's axial spacing, relative to the radius: the junctions' fallback (see
+/// [`mesh_vessel_or_coarser_junctions`]).
+const COARSE_JUNCTION_SPACING: f64 = 0.5;
+
+/// Meshes a vessel (see [`mesh_vessel`]); a branched one refused at an axial spacing finer than
+/// the coarse preset's, with no spacing of its own set for the junctions, is meshed again with
+/// its junctions' transitions and bridges at the coarse preset's spacing (the rest as asked),
+/// and a warning says so. Their sections are swept between curved folds rather than cut by
+/// planes, and thin ones cross each other: sphinxsys_aortic_arch at medium (0.3 radii) had 285
+/// elements inverted around its arch's bridge, and meshed within the bars with the junctions at
+/// 0.5 (the same at coarse). If the retry is refused too, the first refusal is the one returned.
+fn mesh_vessel_or_coarser_junctions(
+    surface: &TriangleSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    progress: &mut Progress,
+) -> Result<(Meshed, Option<Warning>)> {
+    let l = &config.lumen;
+    let retry = centerlines.polylines.len() > 1
+        && l.junction_axial_spacing.is_none()
+        && l.axial_spacing_mm.is_none()
+        && l.axial_spacing < COARSE_JUNCTION_SPACING;
+    match mesh_vessel(surface, centerlines, config, progress) {
+        Err(Error::Geometry(refusal)) if retry => {
+            let lumen =
+                crate::config::LumenConfig { junction_axial_spacing: Some(COARSE_JUNCTION_SPACING), ..l.clone() };
+            let coarser = MeshConfig { lumen, ..config.clone() };
+            let meshed =
+                mesh_vessel(surface, centerlines, &coarser, progress).map_err(|_| Error::Geometry(refusal.clone()))?;
+            let warning = Warning::new(
+                "junction_spacing",
+                format!(
+                    "the junctions' transitions and bridges are spaced at {COARSE_JUNCTION_SPACING} radii (the coarse \
+                     preset's; lumen.junction_axial_spacing), the rest of the vessel at {} as asked: at {} they were \
+                     refused: {refusal}",
+                    l.axial_spacing, l.axial_spacing
+                ),
+            );
+            Ok((meshed, Some(warning)))
+        }
+        other => other.map(|meshed| (meshed, None)),
+    }
 }
 
 /// The centerlines without the paths to `points`: for each point, the polyline whose last point

@@ -176,6 +176,9 @@ pub struct ProjectionSetup<'a> {
     pub template: &'a SectionTemplate,
     pub surface: &'a LumenSurface,
     pub spacing: &'a (dyn Fn(&CenterlineSample) -> f64 + Sync),
+    /// The axial spacing of a junction's transitions and bridges (see
+    /// [`crate::config::LumenConfig::junction_axial_spacing`]).
+    pub junction_spacing: &'a (dyn Fn(&CenterlineSample) -> f64 + Sync),
     pub trim_inlet: f64,
     pub trim_outlet: f64,
     pub normals_outward: bool,
@@ -701,9 +704,9 @@ fn cast_fold(
 ) -> Result<FoldCast> {
     let template = setup.template;
     let towards = station.frame.tangent * sense;
-    let branch_spacing = (setup.spacing)(station);
+    let branch_spacing = (setup.junction_spacing)(station);
     let halfway = transition_sample(j, station, sense, 0.5, station.point);
-    let h = (setup.spacing)(&halfway).clamp(branch_spacing, TRANSITION_SPACING_GROWTH * branch_spacing);
+    let h = (setup.junction_spacing)(&halfway).clamp(branch_spacing, TRANSITION_SPACING_GROWTH * branch_spacing);
     let cells = ((j.transition_length / h).round() as usize).max(2);
     let mut params: Vec<f64> = (1..=cells).map(|i| i as f64 / cells as f64).collect();
     let mut points = transition_points(j.geometry, &j.fold, template, station, &towards, &params);
@@ -862,7 +865,7 @@ fn bridge(
         .collect();
     let centre = curve(start.geometry.centre, end.geometry.centre, &Vector2::zeros());
     let length = branch.length();
-    let cells = ((length / (setup.spacing)(station)).round() as usize).max(2);
+    let cells = ((length / (setup.junction_spacing)(station)).round() as usize).max(2);
     let mut out = vec![up.fold];
     for i in 1..cells {
         let v = i as f64 / cells as f64;

@@ -856,6 +856,7 @@ mod tests {
                     template,
                     surface: &surface,
                     spacing: &spacing,
+                    junction_spacing: &spacing,
                     trim_inlet: 0.0,
                     trim_outlet: 0.0,
                     normals_outward: true,

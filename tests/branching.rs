@@ -214,6 +214,27 @@ fn bundled_y_and_t_fixtures_mesh_conformally_within_the_bars() {
     }
 }
 
+/// `lumen.junction_axial_spacing` spaces the junction's transitions alone: at twice the
+/// preset's spacing each branch keeps its ordinary sections and its transition has fewer (the
+/// fallback that meshes a tree refused at a fine spacing relies on it).
+#[test]
+fn junction_spacing_sets_the_transitions_alone() {
+    let dir = crate_dir().join("fixtures");
+    let (s, c) = (dir.join("y_bifurcation.stl"), dir.join("y_bifurcation_centerlines.vtp"));
+    let preset = MeshConfig::preset(Preset::Medium);
+    let mut coarser = preset.clone();
+    coarser.lumen.junction_axial_spacing = Some(2.0 * preset.lumen.axial_spacing);
+    let sections = |m: &Meshed, in_junction: bool| -> Vec<usize> {
+        m.projected.iter().map(|b| b.sections.iter().filter(|s| s.in_junction == in_junction).count()).collect()
+    };
+    let (a, b) = (mesh(&s, &c, LengthUnit::Mm, &preset), mesh(&s, &c, LengthUnit::Mm, &coarser));
+    assert_eq!(sections(&a, false), sections(&b, false), "the ordinary sections are the preset's");
+    for (k, (fine, coarse)) in sections(&a, true).into_iter().zip(sections(&b, true)).enumerate() {
+        assert!(coarse < fine && coarse >= 2, "branch {k}: {fine} transition sections -> {coarse}");
+    }
+    check_all("y_bifurcation, junctions at twice the spacing", &b);
+}
+
 /// Y-bifurcations with daughters at 30 to 90 degrees from the parent's axis and T-junctions
 /// with a side branch at 30 to 90 degrees, radius ratios 1:1 to 4:1; prints the worst quality
 /// per configuration.
