@@ -22,6 +22,11 @@ pub enum Error {
     /// The geometry defeats the method at a known place (a ray that misses, an inverted element).
     #[error("{0}")]
     Geometry(String),
+    /// A branch ends too close to its junction for the junction's transition: a geometry
+    /// refusal that names the vessel end (mm) it leaves unmeshed, so the vessel can be meshed
+    /// without that branch (see `crate::pipeline::mesh_surface`).
+    #[error("{message}")]
+    ShortBranch { message: String, end_mm: [f64; 3] },
 }
 
 impl Error {

@@ -489,12 +489,20 @@ pub fn mesh_vessel(
     }
     match (best, first_error) {
         (Some((meshed, _)), _) => Ok(meshed),
-        (None, Some(e)) => Err(Error::Geometry(format!(
-            "{e} (vesselhex merged {} into one junction there, as their blocks would overlap, and tried \
-             centring it {} of the way along the branch between them; none meshed)",
-            overlap.place,
-            MERGED_CENTRE_AT.map(|a| a.to_string()).join(", ")
-        ))),
+        (None, Some(e)) => {
+            let tried = format!(
+                "(vesselhex merged {} into one junction there, as their blocks would overlap, and tried centring it \
+                 {} of the way along the branch between them; none meshed)",
+                overlap.place,
+                MERGED_CENTRE_AT.map(|a| a.to_string()).join(", ")
+            );
+            Err(match e {
+                Error::ShortBranch { message, end_mm } => {
+                    Error::ShortBranch { message: format!("{message} {tried}"), end_mm }
+                }
+                e => Error::Geometry(format!("{e} {tried}")),
+            })
+        }
         (None, None) => unreachable!("every place was tried"),
     }
 }
@@ -1299,6 +1307,24 @@ pub fn mesh_surface(
                 ..tree_config.clone()
             };
             let (meshed, coarser) = mesh_vessel_or_coarser_junctions(&surface, &centerlines, &config, progress)
+                .map_err(|e| name_winding(e, &surface))?;
+            settings.warnings.extend(coarser);
+            (meshed, centerlines)
+        }
+        // A branch found on the surface that ends too close to its junction for the junction's
+        // transition (a short capped stub in an aorto-iliac's crotch) does not cost the rest: the
+        // vessel is meshed without it, and its end is said not meshed (report.json, exit 3).
+        Err(Error::ShortBranch { message, end_mm }) if found_ends.is_some() && centerlines.polylines.len() > 2 => {
+            let [x, y, z] = end_mm;
+            settings.warnings.push(Warning::new(
+                "branch_not_meshed",
+                format!(
+                    "the vessel is meshed without its branch to the end at ({x:.3}, {y:.3}, {z:.3}) mm; with it: \
+                     {message}"
+                ),
+            ));
+            let centerlines = without_paths_to(&centerlines, &[end_mm]);
+            let (meshed, coarser) = mesh_vessel_or_coarser_junctions(&surface, &centerlines, &tree_config, progress)
                 .map_err(|e| name_winding(e, &surface))?;
             settings.warnings.extend(coarser);
             (meshed, centerlines)

@@ -550,10 +550,14 @@ pub fn clear_transition_length(
         geometry.centre.z
     );
     if estimate > reach {
-        return Err(Error::Geometry(format!(
-            "{place}: the junction's transition needs {estimate:.1} mm of it, more than the branch leaves before its \
-             end ({reach:.1} mm): the branch ends too close to the junction. Mesh a longer stretch of the vessel"
-        )));
+        let end = branch.at(if at_start { len } else { 0.0 }).point;
+        return Err(Error::ShortBranch {
+            message: format!(
+                "{place}: the junction's transition needs {estimate:.1} mm of it, more than the branch leaves before \
+                 its end ({reach:.1} mm): the branch ends too close to the junction. Mesh a longer stretch of the vessel"
+            ),
+            end_mm: end.into(),
+        });
     }
     Err(Error::Geometry(format!(
         "{place}: no cross-section within {d:.1} mm of the junction is clear of the other branches (every ray \

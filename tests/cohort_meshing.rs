@@ -18,8 +18,9 @@ use std::time::Instant;
 /// 0.35, every face pyramid positive) at both presets; a change that loses one fails here.
 /// palabos_cerebral_aneurysm, whose sac holds the bifurcation, is meshed with the sac as the
 /// junction (it was refused: its outlets curl back past the junction, and its branches leave it
-/// like the legs of a tripod).
-const WITHIN_BARS: [&str; 17] = [
+/// like the legs of a tripod). openlb_aortoiliac_capped is meshed without its stub (see
+/// [`BRANCH_LEFT_OUT`]).
+const WITHIN_BARS: [&str; 18] = [
     "vmtk_aortoiliac",
     "openlb_cerebral_aneurysm_tree",
     "palabos_cerebral_aneurysm",
@@ -37,6 +38,7 @@ const WITHIN_BARS: [&str; 17] = [
     "medlib_voxel_aorta",
     "sphinxsys_pulmonary_bifurcation",
     "sphinxsys_aortic_arch",
+    "openlb_aortoiliac_capped",
 ];
 
 /// The cases meshed within every bar at the coarse preset only: none since the SPHinXsys arch
@@ -69,6 +71,15 @@ const SAC_JUNCTIONS: [&str; 1] = ["palabos_cerebral_aneurysm"];
 /// none since sections may meet a wall leaning up to 40 degrees into a dome (the voxel aorta's
 /// outlet dome was left 50 mm short).
 const ENDS_CUT_SHORT: [&str; 0] = [];
+
+/// The cases meshed without a branch that ends too close to its junction for the junction's
+/// transition, said by a `branch_not_meshed` warning, that end reported not meshed and exit code
+/// 3: the capped aorto-iliac's stub (10.1 mm of branch where the transition needs 15 mm) was
+/// the whole case refused.
+const BRANCH_LEFT_OUT: [&str; 1] = ["openlb_aortoiliac_capped"];
+
+/// Exit code of a mesh written with an end not meshed.
+const EXIT_ENDS_NOT_MESHED: i32 = 3;
 
 /// Interface nodes must lie on the lumen surface to this (um).
 const ON_SURFACE_UM: f64 = 1.0;
@@ -109,8 +120,10 @@ fn cohort_at(preset: &str) {
             }
             continue;
         }
-        if !o.status.success() {
-            failures.push(format!("{}: exit {:?}: {stderr}", case.name, o.status.code()));
+        let branch_left_out = BRANCH_LEFT_OUT.contains(&case.name.as_str());
+        let expected_exit = if branch_left_out { EXIT_ENDS_NOT_MESHED } else { 0 };
+        if o.status.code() != Some(expected_exit) {
+            failures.push(format!("{}: exit {:?} (expected {expected_exit}): {stderr}", case.name, o.status.code()));
             continue;
         }
         let report: serde_json::Value =
@@ -142,7 +155,11 @@ fn cohort_at(preset: &str) {
             report["junctions"].as_array().unwrap().iter().filter(|j| j["sac_elements"].as_u64() > Some(0)).count();
         let checks = [
             (min_sj > 0.0, format!("an inverted element (min scaled Jacobian {min_sj:.3})")),
-            (meshed == ends.len() && ends.len() >= case.ends, format!("{meshed} of {} ends meshed", ends.len())),
+            (
+                meshed + branch_left_out as usize == ends.len() && ends.len() >= case.ends,
+                format!("{meshed} of {} ends meshed", ends.len()),
+            ),
+            (warned("branch_not_meshed") == branch_left_out, format!("branch_not_meshed warned: {}", !branch_left_out)),
             (
                 number("/surface_accuracy/node_to_surface_um/max") < ON_SURFACE_UM,
                 "interface nodes off the surface".to_string(),

@@ -46,7 +46,7 @@ fn to_py(error: vesselhex::Error) -> PyErr {
     match error {
         vesselhex::Error::Input { .. } => InputError::new_err(message),
         vesselhex::Error::Config(_) => ConfigError::new_err(message),
-        vesselhex::Error::Geometry(_) => GeometryError::new_err(message),
+        vesselhex::Error::Geometry(_) | vesselhex::Error::ShortBranch { .. } => GeometryError::new_err(message),
         vesselhex::Error::Io { .. } => FileError::new_err(message),
     }
 }
