@@ -63,6 +63,11 @@ fn main() {
                     meshed += 1;
                     "meshed"
                 }
+                // Written with a vessel end left out (a stub too short for its junction).
+                Some(3) => {
+                    meshed += 1;
+                    "meshed, an end left out"
+                }
                 Some(1) => "refused",
                 _ => "other exit",
             };
