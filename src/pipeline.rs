@@ -1030,22 +1030,44 @@ fn end_reports(ends: &[VesselEnd], inlet: usize, tree: &CenterlineTree, scale: f
         .collect()
 }
 
-/// One warning per end no meshed branch reaches.
-fn ends_not_meshed(ends: &[EndReport], unit: LengthUnit) -> Vec<Warning> {
+/// One warning per end no meshed branch reaches; `left_out[k]` when end k's branch was found but
+/// left out, too short for its junction (see `branch_not_meshed` in [`mesh_surface`]): pointing
+/// the centerlines at it would not help there.
+fn ends_not_meshed(ends: &[EndReport], left_out: &[bool], unit: LengthUnit) -> Vec<Warning> {
     ends.iter()
-        .filter(|e| !e.meshed)
-        .map(|e| {
+        .zip(left_out.iter().chain(std::iter::repeat(&false)))
+        .filter(|(e, _)| !e.meshed)
+        .map(|(e, &short)| {
             let [x, y, z] = e.position;
+            let why = if short {
+                "its branch ends too close to its junction for the junction's transition (branch_not_meshed); a \
+                 longer stretch of the vessel there would let it be meshed"
+            } else {
+                "no branch of the mesh reaches it; give centerlines that reach it (--centerlines) or a point near it \
+                 (--ends)"
+            };
             Warning::new(
                 "end_not_meshed",
                 format!(
-                    "the {} end at ({x:.3}, {y:.3}, {z:.3}) {unit} (radius {:.3} {unit}) is not meshed: no branch of the \
-                     mesh reaches it; give centerlines that reach it (--centerlines) or a point near it (--ends)",
+                    "the {} end at ({x:.3}, {y:.3}, {z:.3}) {unit} (radius {:.3} {unit}) is not meshed: {why}",
                     e.kind, e.radius
                 ),
             )
         })
         .collect()
+}
+
+/// Which of `ends` lead to a branch left out (`left_out_mm`: the branches' far ends, mm): the
+/// nearest end to each.
+fn ends_left_out(ends: &[VesselEnd], left_out_mm: &[[f64; 3]]) -> Vec<bool> {
+    let mut marked = vec![false; ends.len()];
+    for p in left_out_mm {
+        let gap = |e: &VesselEnd| (e.centre - Point3::from(*p)).norm();
+        if let Some(k) = (0..ends.len()).min_by(|&a, &b| gap(&ends[a]).total_cmp(&gap(&ends[b]))) {
+            marked[k] = true;
+        }
+    }
+    marked
 }
 
 /// A vessel end whose mesh stops more than this many radii short of it (the vessel's radius at
@@ -1249,6 +1271,9 @@ pub struct MeshedVessel {
     /// Refinement, segmented walls and flow extensions done after meshing (millimetres).
     pub additions: crate::finishing::Additions,
     pub settings: MeshSettings,
+    /// The far ends (mm) of branches found on the surface and left out, too short for their
+    /// junction (a `branch_not_meshed` warning each).
+    pub left_out_mm: Vec<[f64; 3]>,
 }
 
 /// Meshes a surface already read (millimetres) as `vesselhex mesh` does: the surface cleaned
@@ -1287,6 +1312,7 @@ pub fn mesh_surface(
     crate::finishing::scale_estimate(&mut estimate, config);
     crate::resources::check_fits(&estimate, settings.max_memory, &centerline_source)?;
     let tree_config = keep_extracted_ends(config, found_ends.as_ref());
+    let mut left_out_mm = vec![];
     let attempt = mesh_vessel_or_coarser_junctions(&surface, &centerlines, &tree_config, progress);
     let (mut meshed, centerlines) = match attempt {
         Ok((meshed, coarser)) => {
@@ -1324,6 +1350,7 @@ pub fn mesh_surface(
                 ),
             ));
             let centerlines = without_paths_to(&centerlines, &[end_mm]);
+            left_out_mm.push(end_mm);
             let (meshed, coarser) = mesh_vessel_or_coarser_junctions(&surface, &centerlines, &tree_config, progress)
                 .map_err(|e| name_winding(e, &surface))?;
             settings.warnings.extend(coarser);
@@ -1334,7 +1361,18 @@ pub fn mesh_surface(
     let limits = ReadLimits::within(settings.max_memory);
     let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress)?;
     let (ends, inlet) = found_ends.unwrap_or_else(|| tree_ends(&meshed.tree));
-    Ok(MeshedVessel { meshed, surface, centerline_source, centerlines, ends, inlet, hygiene, additions, settings })
+    Ok(MeshedVessel {
+        meshed,
+        surface,
+        centerline_source,
+        centerlines,
+        ends,
+        inlet,
+        hygiene,
+        additions,
+        settings,
+        left_out_mm,
+    })
 }
 
 /// The coarse preset's axial spacing, relative to the radius: the junctions' fallback (see
@@ -1461,7 +1499,8 @@ pub fn write_vessel(
 pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(String, f64)]) -> Report {
     let mut warnings = vessel.settings.warnings.clone();
     let ends = end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, config.output_units.from_mm());
-    warnings.extend(ends_not_meshed(&ends, config.output_units));
+    let left_out = ends_left_out(&vessel.ends, &vessel.left_out_mm);
+    warnings.extend(ends_not_meshed(&ends, &left_out, config.output_units));
     warnings.extend(ends_cut_short(&vessel.meshed, config));
     let mut report =
         build_report(&vessel.meshed, &vessel.surface, &vessel.centerline_source, config, timings, warnings);
@@ -1499,9 +1538,16 @@ mod tests {
         let meshed: Vec<bool> = reports.iter().map(|e| e.meshed).collect();
         assert_eq!(meshed, [true, true, false]);
         assert!(reports[0].inlet && !reports[1].inlet && reports[1].kind == "dome");
-        let warnings = ends_not_meshed(&reports, LengthUnit::Mm);
+        let warnings = ends_not_meshed(&reports, &[], LengthUnit::Mm);
         assert_eq!(warnings.len(), 1);
         assert!(warnings[0].kind == "end_not_meshed" && warnings[0].message.contains("(20.000, 0.000, 15.000) mm"));
+        assert!(warnings[0].message.contains("--ends"), "{}", warnings[0].message);
+        // An end whose branch was left out, too short for its junction, is said so instead.
+        let left_out = super::ends_left_out(&ends, &[[19.0, 0.5, 14.0]]);
+        assert_eq!(left_out, [false, false, true]);
+        let warnings = ends_not_meshed(&reports, &left_out, LengthUnit::Mm);
+        assert!(warnings[0].message.contains("too close to its junction"), "{}", warnings[0].message);
+        assert!(!warnings[0].message.contains("--ends"), "{}", warnings[0].message);
     }
 
     fn finish(worst: f64, worst_wall: f64, wall_mean: f64) -> FinishQuality {

@@ -162,6 +162,13 @@ fn cohort_at(preset: &str) {
             ),
             (warned("branch_not_meshed") == branch_left_out, format!("branch_not_meshed warned: {}", !branch_left_out)),
             (
+                report["warnings"].as_array().unwrap().iter().all(|w| {
+                    w["kind"] != "end_not_meshed"
+                        || w["message"].as_str().unwrap().contains("too close to its junction") == branch_left_out
+                }),
+                "an end_not_meshed warning that does not give the left-out branch's cause".to_string(),
+            ),
+            (
                 number("/surface_accuracy/node_to_surface_um/max") < ON_SURFACE_UM,
                 "interface nodes off the surface".to_string(),
             ),
