@@ -550,7 +550,7 @@ pub fn clear_transition_length(
         geometry.centre.z
     );
     if estimate > reach {
-        let end = branch.at(if at_start { len } else { 0.0 }).point;
+        let end = at(len).point;
         return Err(Error::ShortBranch {
             message: format!(
                 "{place}: the junction's transition needs {estimate:.1} mm of it, more than the branch leaves before \

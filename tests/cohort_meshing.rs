@@ -6,7 +6,7 @@
 //! one end said not meshed, [`BRANCH_LEFT_OUT`]) and whose interface nodes lie on the surface,
 //! within the bars as `report.json` says, warning where part of the surface is left out, or
 //! else a one-line refusal naming the surface. The cases that
-//! mesh within every bar today ([`WITHIN_BARS`], [`WITHIN_BARS_AT_COARSE`]) must go on doing so.
+//! mesh within every bar today ([`WITHIN_BARS`], at both presets) must go on doing so.
 //! A tree's OpenFOAM case of lumen and wall (`openfoam-fsi`) must pass OpenFOAM's checkMesh.
 //! Under CI a missing folder or case, or a missing checkMesh, is a failure.
 
@@ -42,19 +42,10 @@ const WITHIN_BARS: [&str; 18] = [
     "openlb_aortoiliac_capped",
 ];
 
-/// The cases meshed within every bar at the coarse preset only: none since the SPHinXsys arch
-/// meets the bars at medium, its junctions spaced as at coarse (see [`JUNCTIONS_COARSENED`]).
-const WITHIN_BARS_AT_COARSE: [&str; 0] = [];
-
 /// The cases whose junctions are refused at the medium preset's spacing and meshed at the
 /// coarse preset's, said by a `junction_spacing` warning: the SPHinXsys arch, whose bridge
 /// along the arch had 285 elements inverted at 0.3 radii.
 const JUNCTIONS_COARSENED: [&str; 1] = ["sphinxsys_aortic_arch"];
-
-/// The cases meshed at the coarse preset, every end, though short of a bar (they were refused
-/// before): a change that refuses one again fails here. None since the SPHinXsys arch meets the
-/// bars.
-const MESHED_AT_COARSE: [&str; 0] = [];
 
 /// The cases whose mesh leaves part of the surface out, said by a `surface_not_meshed` warning:
 /// none since a saccular aneurysm's sac is meshed as a blind branch closed by a dome.
@@ -96,9 +87,7 @@ fn cohort_at(preset: &str) {
         "case", "hexes", "min SJ", "wall", "skew", "pyramid", "ends", "s"
     );
     let mut failures = vec![];
-    let expected_within =
-        |name: &str| WITHIN_BARS.contains(&name) || (preset == "coarse" && WITHIN_BARS_AT_COARSE.contains(&name));
-    let must_mesh = |name: &str| preset == "coarse" && MESHED_AT_COARSE.contains(&name);
+    let expected_within = |name: &str| WITHIN_BARS.contains(&name);
     for case in &cases {
         let surface = vessels.join(&case.name).join(&case.surface);
         assert!(surface.exists(), "{}: {} is missing", case.name, surface.display());
@@ -116,7 +105,7 @@ fn cohort_at(preset: &str) {
             // A refusal: one line, naming the surface.
             let error = stderr.lines().find(|l| l.starts_with("vesselhex: error:")).unwrap_or_default();
             println!("{preset}: {:<32} {:>61.1}  refused: {}", case.name, seconds, error);
-            if !error.contains(&case.surface) || expected_within(&case.name) || must_mesh(&case.name) {
+            if !error.contains(&case.surface) || expected_within(&case.name) {
                 failures.push(format!("{}: {error}", case.name));
             }
             continue;
