@@ -105,7 +105,8 @@ pub struct LumenConfig {
     /// Axial element length in a junction's transitions and in the bridges between close
     /// junctions, relative to the local radius; unset, the spacing above. Their sections are
     /// swept between curved folds, so thin ones cross where a plane section would not (see
-    /// `crate::pipeline::mesh_surface`, which retries at the coarse preset's spacing).
+    /// `crate::pipeline::mesh_vessel`, which, unset, spaces them at the coarse preset's where
+    /// junctions were merged or the spacing above was refused).
     pub junction_axial_spacing: Option<f64>,
     /// Distance of the outer block surface (the ray targets) from the centerline, relative to
     /// the local radius. Far targets make rays nearly radial.

@@ -7,6 +7,7 @@ use crate::centerline::CenterlineTree;
 use crate::junction::JunctionGeometry;
 use crate::mesh::VesselMesh;
 use crate::projection::ProjectedBranch;
+use crate::report::Warning;
 use crate::volume::JunctionVariant;
 
 /// A finished mesh with what was learnt on the way.
@@ -22,4 +23,7 @@ pub struct Meshed {
     pub junction_of: Vec<Option<usize>>,
     /// How the junctions were finished (wall growth, surface smoothing).
     pub junction_variant: JunctionVariant,
+    /// Where the meshing departed from the settings, and why (a `junction_spacing` warning:
+    /// the junctions spaced as at the coarse preset).
+    pub notes: Vec<Warning>,
 }

@@ -452,24 +452,34 @@ pub fn mesh_vessel(
         Ok(junctions) => find_junction_overlap(&tree, &junctions, &lumen_surface),
         Err(e) => Some(unanalysable_close_junction(&tree, &lumen_surface).ok_or(e)?),
     };
+    let coarser = coarser_junctions(config, centerlines);
     let Some(overlap) = overlap else {
         let close_merges = tree.close_merges.clone();
-        let meshed = mesh_tree(surface, &lumen_surface, tree, &centerlines.source, config, true, progress);
-        if close_merges.is_empty() || meshed.as_ref().is_ok_and(|m| FinishQuality::of_mesh(&m.mesh).meets_bars()) {
-            return meshed;
-        }
-        return recentre_close_merges(surface, &lumen_surface, centerlines, config, meshed, &close_merges, progress);
+        let meshed = mesh_tree_recentred(surface, &lumen_surface, tree, centerlines, config, &close_merges, progress);
+        let (Err(Error::Geometry(refusal)), Some(coarser)) = (&meshed, coarser) else { return meshed };
+        let tree = CenterlineTree::build(centerlines, &config.centerline, Some(&lumen_surface))?;
+        let mut retried =
+            mesh_tree_recentred(surface, &lumen_surface, tree, centerlines, &coarser, &close_merges, progress)
+                .map_err(|_| Error::Geometry(refusal.clone()))?;
+        retried.notes.push(junction_spacing_note(
+            config,
+            &format!("at {} they were refused: {refusal}", config.lumen.axial_spacing),
+        ));
+        return Ok(retried);
     };
     // Two junctions overlap: they become one, centred on the branch between them. Where along
     // it depends on the branches around (the middle of the merged junction is neither end), so
     // each place of MERGED_CENTRE_AT is meshed and the best mesh kept (judged as a junction's
-    // finishes are, on the whole mesh), the first of equals.
+    // finishes are, on the whole mesh), the first of equals. Its transitions sweep between two
+    // junctions' folds, so they are spaced as at the coarse preset (see `coarser_junctions`).
+    let merged_config = coarser.as_ref().unwrap_or(config);
     let segment = tree.segments[overlap.branch];
     let mut best: Option<(Meshed, FinishQuality)> = None;
     let mut first_error = None;
     for at in MERGED_CENTRE_AT {
-        let attempt = merged_tree(centerlines, config, &lumen_surface, segment, at)
-            .and_then(|tree| mesh_tree(surface, &lumen_surface, tree, &centerlines.source, config, false, progress));
+        let attempt = merged_tree(centerlines, merged_config, &lumen_surface, segment, at).and_then(|tree| {
+            mesh_tree(surface, &lumen_surface, tree, &centerlines.source, merged_config, false, progress)
+        });
         match attempt {
             Ok(meshed) => {
                 let quality = FinishQuality::of_mesh(&meshed.mesh);
@@ -488,7 +498,18 @@ pub fn mesh_vessel(
         }
     }
     match (best, first_error) {
-        (Some((meshed, _)), _) => Ok(meshed),
+        (Some((mut meshed, _)), _) => {
+            if coarser.is_some() {
+                let why = format!(
+                    "{} were merged into one junction, as their blocks would overlap, and a merged junction's \
+                     transitions sweep between both junctions' folds, where thinner sections cross (set \
+                     lumen.junction_axial_spacing to space them otherwise)",
+                    overlap.place
+                );
+                meshed.notes.push(junction_spacing_note(config, &why));
+            }
+            Ok(meshed)
+        }
         (None, Some(e)) => {
             let tried = format!(
                 "(vesselhex merged {} into one junction there, as their blocks would overlap, and tried centring it \
@@ -505,6 +526,61 @@ pub fn mesh_vessel(
         }
         (None, None) => unreachable!("every place was tried"),
     }
+}
+
+/// The coarse preset's axial spacing, relative to the radius: what [`coarser_junctions`] spaces
+/// the junctions at.
+const COARSE_JUNCTION_SPACING: f64 = 0.5;
+
+/// The settings with a branched vessel's junction transitions and bridges spaced at the coarse
+/// preset's spacing (the rest as asked), when they ask a finer spacing relative to the radius
+/// and none for the junctions; None otherwise. [`mesh_vessel`] meshes with them a vessel whose
+/// junctions were merged (their transitions sweep between two junctions' folds over a spine up
+/// to twice as long) and one refused with the settings as given. A transition's sections are
+/// swept between curved folds, not cut by planes, and thin ones cross each other:
+/// sphinxsys_aortic_arch at medium (0.3 radii) had 285 elements inverted around its arch's
+/// bridge, and 0.4 and 0.45 were refused too; at 0.5 it meets the bars, and the two Gmsh arches
+/// (merged junctions too) take a quarter of the time, within the bars.
+fn coarser_junctions(config: &MeshConfig, centerlines: &Centerlines) -> Option<MeshConfig> {
+    let l = &config.lumen;
+    let finer = centerlines.polylines.len() > 1
+        && l.junction_axial_spacing.is_none()
+        && l.axial_spacing_mm.is_none()
+        && l.axial_spacing < COARSE_JUNCTION_SPACING;
+    finer.then(|| {
+        let lumen = crate::config::LumenConfig { junction_axial_spacing: Some(COARSE_JUNCTION_SPACING), ..l.clone() };
+        MeshConfig { lumen, ..config.clone() }
+    })
+}
+
+/// The `junction_spacing` warning: the junctions spaced at the coarse preset's spacing, `why`.
+fn junction_spacing_note(config: &MeshConfig, why: &str) -> Warning {
+    Warning::new(
+        "junction_spacing",
+        format!(
+            "the junctions' transitions and bridges are spaced at {COARSE_JUNCTION_SPACING} radii (the coarse \
+             preset's; lumen.junction_axial_spacing), the rest of the vessel at {} as asked: {why}",
+            config.lumen.axial_spacing
+        ),
+    )
+}
+
+/// A tree meshed ([`mesh_tree`]); one whose close junctions were merged and whose mesh is short
+/// of a bar or refused is meshed again with them centred elsewhere ([`recentre_close_merges`]).
+fn mesh_tree_recentred(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    tree: CenterlineTree,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    close_merges: &[usize],
+    progress: &mut Progress,
+) -> Result<Meshed> {
+    let meshed = mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, true, progress);
+    if close_merges.is_empty() || meshed.as_ref().is_ok_and(|m| FinishQuality::of_mesh(&m.mesh).meets_bars()) {
+        return meshed;
+    }
+    recentre_close_merges(surface, lumen_surface, centerlines, config, meshed, close_merges, progress)
 }
 
 /// Which branches end blind in a saccular aneurysm's sac (see [`ends_in_sac`]), each renamed
@@ -830,7 +906,7 @@ pub fn mesh_tree(
     progress.stage("surface accuracy");
     let aligned: Vec<Branch> = plans.into_iter().map(|p| p.branch).collect();
     let accuracy = surface_accuracy(&mesh, lumen_surface, &aligned, &projected)?;
-    Ok(Meshed { mesh, tree, projected, accuracy, templates, junctions, junction_of, junction_variant })
+    Ok(Meshed { mesh, tree, projected, accuracy, templates, junctions, junction_of, junction_variant, notes: vec![] })
 }
 
 /// Everything `vesselhex mesh` was asked.
@@ -1313,12 +1389,9 @@ pub fn mesh_surface(
     crate::resources::check_fits(&estimate, settings.max_memory, &centerline_source)?;
     let tree_config = keep_extracted_ends(config, found_ends.as_ref());
     let mut left_out_mm = vec![];
-    let attempt = mesh_vessel_or_coarser_junctions(&surface, &centerlines, &tree_config, progress);
+    let attempt = mesh_vessel(&surface, &centerlines, &tree_config, progress);
     let (mut meshed, centerlines) = match attempt {
-        Ok((meshed, coarser)) => {
-            settings.warnings.extend(coarser);
-            (meshed, centerlines)
-        }
+        Ok(meshed) => (meshed, centerlines),
         // Sacs found on the surface never cost the vessel: refused with them, it is meshed
         // without them, and each is said not meshed (a warning, report.json's ends, exit 3).
         Err(e) if found_ends.is_some() && !tree_config.centerline.sacs_mm.is_empty() => {
@@ -1332,9 +1405,8 @@ pub fn mesh_surface(
                 centerline: crate::config::CenterlineConfig { sacs_mm: vec![], ..tree_config.centerline.clone() },
                 ..tree_config.clone()
             };
-            let (meshed, coarser) = mesh_vessel_or_coarser_junctions(&surface, &centerlines, &config, progress)
-                .map_err(|e| name_winding(e, &surface))?;
-            settings.warnings.extend(coarser);
+            let meshed =
+                mesh_vessel(&surface, &centerlines, &config, progress).map_err(|e| name_winding(e, &surface))?;
             (meshed, centerlines)
         }
         // A branch found on the surface that ends too close to its junction for the junction's
@@ -1351,13 +1423,13 @@ pub fn mesh_surface(
             ));
             let centerlines = without_paths_to(&centerlines, &[end_mm]);
             left_out_mm.push(end_mm);
-            let (meshed, coarser) = mesh_vessel_or_coarser_junctions(&surface, &centerlines, &tree_config, progress)
-                .map_err(|e| name_winding(e, &surface))?;
-            settings.warnings.extend(coarser);
+            let meshed =
+                mesh_vessel(&surface, &centerlines, &tree_config, progress).map_err(|e| name_winding(e, &surface))?;
             (meshed, centerlines)
         }
         Err(e) => return Err(name_winding(e, &surface)),
     };
+    settings.warnings.append(&mut meshed.notes);
     let limits = ReadLimits::within(settings.max_memory);
     let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress)?;
     let (ends, inlet) = found_ends.unwrap_or_else(|| tree_ends(&meshed.tree));
@@ -1373,50 +1445,6 @@ pub fn mesh_surface(
         settings,
         left_out_mm,
     })
-}
-
-/// The coarse preset's axial spacing, relative to the radius: the junctions' fallback (see
-/// [`mesh_vessel_or_coarser_junctions`]).
-const COARSE_JUNCTION_SPACING: f64 = 0.5;
-
-/// Meshes a vessel (see [`mesh_vessel`]); a branched one refused at an axial spacing finer than
-/// the coarse preset's, with no spacing of its own set for the junctions, is meshed again with
-/// its junctions' transitions and bridges at the coarse preset's spacing (the rest as asked),
-/// and a warning says so. Their sections are swept between curved folds rather than cut by
-/// planes, and thin ones cross each other: sphinxsys_aortic_arch at medium (0.3 radii) had 285
-/// elements inverted around its arch's bridge, and meshed within the bars with the junctions at
-/// 0.5 (the same at coarse). If the retry is refused too, the first refusal is the one returned.
-fn mesh_vessel_or_coarser_junctions(
-    surface: &TriangleSurface,
-    centerlines: &Centerlines,
-    config: &MeshConfig,
-    progress: &mut Progress,
-) -> Result<(Meshed, Option<Warning>)> {
-    let l = &config.lumen;
-    let retry = centerlines.polylines.len() > 1
-        && l.junction_axial_spacing.is_none()
-        && l.axial_spacing_mm.is_none()
-        && l.axial_spacing < COARSE_JUNCTION_SPACING;
-    match mesh_vessel(surface, centerlines, config, progress) {
-        Err(Error::Geometry(refusal)) if retry => {
-            let lumen =
-                crate::config::LumenConfig { junction_axial_spacing: Some(COARSE_JUNCTION_SPACING), ..l.clone() };
-            let coarser = MeshConfig { lumen, ..config.clone() };
-            let meshed =
-                mesh_vessel(surface, centerlines, &coarser, progress).map_err(|_| Error::Geometry(refusal.clone()))?;
-            let warning = Warning::new(
-                "junction_spacing",
-                format!(
-                    "the junctions' transitions and bridges are spaced at {COARSE_JUNCTION_SPACING} radii (the coarse \
-                     preset's; lumen.junction_axial_spacing), the rest of the vessel at {} as asked: at {} they were \
-                     refused: {refusal}",
-                    l.axial_spacing, l.axial_spacing
-                ),
-            );
-            Ok((meshed, Some(warning)))
-        }
-        other => other.map(|meshed| (meshed, None)),
-    }
 }
 
 /// The centerlines without the paths to `points`: for each point, the polyline whose last point

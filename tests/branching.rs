@@ -406,6 +406,27 @@ fn aortic_arch_meshes_with_its_overlapping_junctions_merged() {
             merged.slots.iter().any(|s| outlet_radius(&tree.branches[s.branch]) == smallest),
             "{name}: the left common carotid leaves the merged junction"
         );
+        // Merged junctions are spaced as at the coarse preset, and a note says so where the
+        // preset asks finer (medium), not where it asks that (coarse).
+        let noted = |m: &Meshed| m.notes.iter().any(|n| n.kind == "junction_spacing" && n.message.contains("merged"));
+        assert_eq!(noted(&m), preset == Preset::Medium, "{name}: junction_spacing note");
+        if preset == Preset::Medium {
+            // A junction spacing set in the settings is kept: the transitions get more sections.
+            let mut asked = MeshConfig::preset(preset);
+            asked.lumen.junction_axial_spacing = Some(asked.lumen.axial_spacing);
+            let finer = mesh(&d.join("aorta.stl"), &d.join("centerlinesAORTA.vtk"), LengthUnit::M, &asked);
+            let transition_sections = |m: &Meshed| -> usize {
+                m.projected.iter().map(|b| b.sections.iter().filter(|s| s.in_junction).count()).sum()
+            };
+            assert!(!noted(&finer), "{name}: a junction spacing asked for is kept without a note");
+            assert!(
+                transition_sections(&finer) > transition_sections(&m),
+                "{name}: {} transition sections at the asked spacing, {} as at coarse",
+                transition_sections(&finer),
+                transition_sections(&m)
+            );
+            check_all(&format!("{name}, junctions at the preset's spacing"), &finer);
+        }
     }
     // Its own centerlines: through every writer at the coarse preset, the VTU at the medium one.
     let surface = d.join("aorta.stl");
