@@ -19,6 +19,7 @@ pub mod extensions;
 pub mod finishing;
 pub mod input;
 pub mod junction;
+pub mod junction_finish;
 pub mod mesh;
 pub mod meshed;
 pub mod node_optimisation;

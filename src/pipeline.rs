@@ -19,6 +19,7 @@ use crate::junction::{
     fold_normal, keep_fold_cores_inside, signed_angle, twist_frames, unanalysable_close_junction, FoldEnd,
     JunctionGeometry,
 };
+use crate::junction_finish::{finish_junctions, FinishQuality};
 use crate::mesh::VesselMesh;
 use crate::output::OutputFolder;
 use crate::progress::Progress;
@@ -30,10 +31,7 @@ use crate::report::{
 use crate::resources::short;
 use crate::surface::LumenSurface;
 use crate::units::LengthUnit;
-use crate::volume::{
-    build_volume, JunctionOptimisation, JunctionVariant, JunctionWall, RadialLevels, VolumeInputs, QUALITY_BAR_SJ,
-    WALL_MEAN_BAR_SJ,
-};
+use crate::volume::{JunctionWall, RadialLevels, VolumeInputs};
 use crate::writers::{self, WriteOptions};
 use nalgebra::Point3;
 use rayon::prelude::*;
@@ -152,71 +150,6 @@ fn plan_branches<'a>(
             })
         })
         .collect()
-}
-
-/// A volume built with one junction finish: mesh, junction of each element, the finish, and
-/// its figures.
-type FinishedVolume = (VesselMesh, Vec<Option<usize>>, JunctionVariant, FinishQuality);
-
-/// What a branched vessel's finish is judged by: its worst junction element, its worst junction
-/// wall element and its wall's mean scaled Jacobian.
-#[derive(Debug, Clone, Copy)]
-struct FinishQuality {
-    worst: f64,
-    worst_wall: f64,
-    wall_mean: f64,
-}
-
-impl FinishQuality {
-    /// A whole mesh's figures (its quality annotated).
-    fn of_mesh(mesh: &VesselMesh) -> FinishQuality {
-        let validity: Vec<f64> =
-            mesh.quality.iter().map(|q| crate::quality::validity_from(q.scaled_jacobian, q.face_pyramid)).collect();
-        FinishQuality::of(mesh, &validity, |_| true)
-    }
-
-    /// The figures from each element's validity (its scaled Jacobian while its face pyramids are
-    /// positive, see [`crate::quality::validity`]: a finish whose wall has a cell that checkMesh
-    /// fails loses as one with an inverted cell would): the worst of the elements `judged`, the
-    /// worst of those in the wall, the mean over the wall (summed in element order, whatever the
-    /// thread count).
-    fn of(mesh: &VesselMesh, validity: &[f64], judged: impl Fn(usize) -> bool) -> FinishQuality {
-        let worst = |in_wall: bool| {
-            (0..validity.len())
-                .filter(|&e| judged(e) && (!in_wall || mesh.regions[e].is_wall()))
-                .map(|e| validity[e])
-                .fold(f64::INFINITY, f64::min)
-        };
-        let wall = &validity[mesh.wall_range()];
-        let wall_mean = wall.iter().map(|q| q.max(-1.0)).sum::<f64>() / wall.len().max(1) as f64;
-        FinishQuality { worst: worst(false), worst_wall: worst(true), wall_mean }
-    }
-
-    /// The issue's bars first (a finish meeting them beats one that does not, however much
-    /// better the other's worst element: what the user is promised), then the worst junction
-    /// element, the worst junction wall element and the wall mean. On every vessel measured
-    /// (the real ones, the arch from either centerlines, the sweep) the finish kept is the one
-    /// the worst elements alone would pick; the bars decide where a finish with a slightly
-    /// better worst element has its wall mean below 0.85.
-    fn key(&self) -> [f64; 6] {
-        [
-            self.worst.min(QUALITY_BAR_SJ),
-            self.worst_wall.min(QUALITY_BAR_SJ),
-            self.wall_mean.min(WALL_MEAN_BAR_SJ),
-            self.worst,
-            self.worst_wall,
-            self.wall_mean,
-        ]
-    }
-
-    fn meets_bars(&self) -> bool {
-        self.worst >= QUALITY_BAR_SJ && self.wall_mean >= WALL_MEAN_BAR_SJ
-    }
-
-    /// Strictly better (so the first of equals is kept).
-    fn better_than(&self, other: &FinishQuality) -> bool {
-        self.key().partial_cmp(&other.key()) == Some(std::cmp::Ordering::Greater)
-    }
 }
 
 /// Least stretch of ordinary sections between two junctions' transitions, in end radii (the
@@ -666,6 +599,74 @@ fn merged_tree(
     }
 }
 
+/// A tree's blocks projected onto the surface: its junctions, each branch's cross-section
+/// template, its plan (frames turned to meet its junctions' folds) and its projected sections.
+struct ProjectedTree {
+    junctions: Vec<JunctionGeometry>,
+    templates: Vec<SectionTemplate>,
+    plans: Vec<BranchPlan>,
+    projected: Vec<ProjectedBranch>,
+}
+
+/// Analyses a tree's junctions and projects its branches' sections onto the surface (the
+/// branches ending in a sac renamed for it). `steep_short_branches`: see
+/// [`ProjectionSetup::steep_short_branches`].
+fn project_tree(
+    tree: &mut CenterlineTree,
+    lumen_surface: &LumenSurface,
+    config: &MeshConfig,
+    normals_outward: bool,
+    steep_short_branches: bool,
+) -> Result<ProjectedTree> {
+    let l = &config.lumen;
+    let mut junctions = analyse_junctions(tree, lumen_surface)?;
+    check_junction_spacing(tree, &junctions, lumen_surface)?;
+    if !junctions.is_empty() && !l.core_elements.is_multiple_of(2) {
+        return Err(Error::Config(format!(
+            "lumen.core_elements = {} is odd: a branching vessel needs an even number (the junction's spine runs \
+             along the middle grid line of the core); use {}",
+            l.core_elements,
+            l.core_elements + 1
+        )));
+    }
+    // Every junction's pages get half the core's cells, so every branch keeps the square O-grid
+    // of the settings (thin pages, BRANCHING.md §4.3, are to give small side branches fewer).
+    equal_cells(&mut junctions, l.core_elements);
+    keep_fold_cores_inside(&mut junctions, l.core_size, lumen_surface);
+    let templates: Vec<SectionTemplate> = branch_core_dims(tree, &junctions, l.core_elements, lumen_surface)?
+        .into_iter()
+        .map(|(nx, ny)| SectionTemplate::rect(nx, ny, l.core_size, l.ray_reach))
+        .collect();
+    let sacs = name_sacs(tree, &config.centerline.sacs_mm);
+    let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
+    let junction_spacing =
+        |s: &crate::centerline::CenterlineSample| l.junction_axial_spacing.map_or_else(|| spacing(s), |k| k * s.radius);
+    let setup_of = |b: usize| ProjectionSetup {
+        template: &templates[b],
+        surface: lumen_surface,
+        spacing: &spacing,
+        junction_spacing: &junction_spacing,
+        trim_inlet: config.centerline.trim_inlet,
+        trim_outlet: config.centerline.trim_outlet,
+        normals_outward,
+        steep_short_branches,
+        dome_end: sacs[b],
+    };
+    let plans = plan_branches(tree, &junctions, &setup_of)?;
+    let projected: Vec<ProjectedBranch> = plans
+        .iter()
+        .enumerate()
+        .map(|(b, plan)| {
+            let end = |e: &Option<(usize, FoldEnd, f64)>| {
+                e.map(|(j, fold, length)| JunctionEnd { geometry: &junctions[j], fold, transition_length: length })
+            };
+            let (start, finish) = (end(&plan.start), end(&plan.end));
+            project_branch(&plan.branch, &plan.caps, b, &setup_of(b), start.as_ref(), finish.as_ref())
+        })
+        .collect::<Result<_>>()?;
+    Ok(ProjectedTree { junctions, templates, plans, projected })
+}
+
 /// Meshes a vessel from its indexed surface and its centerline tree (both in mm).
 /// `steep_short_branches`: see [`ProjectionSetup::steep_short_branches`].
 pub fn mesh_tree(
@@ -681,54 +682,11 @@ pub fn mesh_tree(
     let normals_outward = check_inside(lumen_surface, &tree, centerline_source)?;
 
     progress.stage("projection");
-    let l = &config.lumen;
-    let mut junctions = analyse_junctions(&tree, lumen_surface)?;
-    check_junction_spacing(&tree, &junctions, lumen_surface)?;
-    if !junctions.is_empty() && !l.core_elements.is_multiple_of(2) {
-        return Err(Error::Config(format!(
-            "lumen.core_elements = {} is odd: a branching vessel needs an even number (the junction's spine runs \
-             along the middle grid line of the core); use {}",
-            l.core_elements,
-            l.core_elements + 1
-        )));
-    }
-    // Every junction's pages get half the core's cells, so every branch keeps the square O-grid
-    // of the settings (thin pages, BRANCHING.md §4.3, are to give small side branches fewer).
-    equal_cells(&mut junctions, l.core_elements);
-    keep_fold_cores_inside(&mut junctions, l.core_size, lumen_surface);
-    let templates: Vec<SectionTemplate> = branch_core_dims(&tree, &junctions, l.core_elements, lumen_surface)?
-        .into_iter()
-        .map(|(nx, ny)| SectionTemplate::rect(nx, ny, l.core_size, l.ray_reach))
-        .collect();
-    let sacs = name_sacs(&mut tree, &config.centerline.sacs_mm);
-    let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
-    let junction_spacing =
-        |s: &crate::centerline::CenterlineSample| l.junction_axial_spacing.map_or_else(|| spacing(s), |k| k * s.radius);
-    let setup_of = |b: usize| ProjectionSetup {
-        template: &templates[b],
-        surface: lumen_surface,
-        spacing: &spacing,
-        junction_spacing: &junction_spacing,
-        trim_inlet: config.centerline.trim_inlet,
-        trim_outlet: config.centerline.trim_outlet,
-        normals_outward,
-        steep_short_branches,
-        dome_end: sacs[b],
-    };
-    let plans = plan_branches(&tree, &junctions, &setup_of)?;
-    let projected: Vec<ProjectedBranch> = plans
-        .iter()
-        .enumerate()
-        .map(|(b, plan)| {
-            let end = |e: &Option<(usize, FoldEnd, f64)>| {
-                e.map(|(j, fold, length)| JunctionEnd { geometry: &junctions[j], fold, transition_length: length })
-            };
-            let (start, finish) = (end(&plan.start), end(&plan.end));
-            project_branch(&plan.branch, &plan.caps, b, &setup_of(b), start.as_ref(), finish.as_ref())
-        })
-        .collect::<Result<_>>()?;
+    let ProjectedTree { junctions, templates, plans, projected } =
+        project_tree(&mut tree, lumen_surface, config, normals_outward, steep_short_branches)?;
 
     progress.stage("volume");
+    let l = &config.lumen;
     let ratio = match l.first_cell_height {
         Some(h) => growth_ratio_for_first_cell(l.radial_elements, h),
         None => l.growth_ratio,
@@ -749,124 +707,29 @@ pub fn mesh_tree(
         branch_names: &names,
         surface: lumen_surface,
     };
-    // A junction is finished in four ways (twelve, short of a bar), and the best is kept (see
-    // FinishQuality), the first of equals in this order. Sliding the transitions' surface nodes
-    // on the triangles frees the lumen where the inner nodes alone cannot (a small branch's
-    // funnel: the synthetic Y at 45 degrees and 4:1 goes from 0.121 to 0.205), but in an acute
-    // crotch it can cost the wall more than it gives the lumen. In an acute crotch the smoothed
-    // normals converge and shear the outer wall layers while the rays, aimed past the crotch, do
-    // not; on real surfaces the normals mostly give the better wall. The wall does not change the
-    // optimisation, so each optimised lumen carries both walls, and a third held in reserve
-    // (below).
-    let mut optimisations = vec![JunctionOptimisation::default()];
-    let mut walls = vec![JunctionWall::SmoothedNormal];
-    if !junctions.is_empty() {
-        optimisations.push(JunctionOptimisation { slide_surface_nodes: true, ..Default::default() });
-        if w.growth == WallGrowth::Normal {
-            walls.extend([JunctionWall::Ray, JunctionWall::Normal]);
-        }
-    }
-    // The junctions' elements and the wall are judged (the rest is the same in every finish).
-    let judge = |mesh: &VesselMesh, junction_of: &[Option<usize>]| -> FinishQuality {
-        let sj: Vec<f64> = (0..mesh.hexes.len())
-            .into_par_iter()
-            .map(|e| {
-                if junction_of[e].is_none() && !mesh.regions[e].is_wall() {
-                    return f64::INFINITY;
-                }
-                let q = crate::quality::validity(&mesh.corners(e));
-                if q.is_nan() {
-                    f64::NEG_INFINITY
-                } else {
-                    q
-                }
-            })
-            .collect();
-        FinishQuality::of(mesh, &sj, |e| junction_of[e].is_some())
-    };
-    // Built side by side; the choice is made in the fixed order above, so it does not depend
-    // on the thread count.
-    let build_all = |optimisations: &[JunctionOptimisation], walls: &[JunctionWall]| -> Vec<FinishedVolume> {
-        let built: Vec<_> = optimisations
-            .par_iter()
-            .map(|&optimisation| (optimisation, build_volume(&inputs, optimisation, walls)))
-            .collect();
-        built
-            .into_iter()
-            .flat_map(|(optimisation, (meshes, junction_of))| {
-                meshes.into_iter().zip(walls).map(move |(mesh, &wall)| {
-                    let q = judge(&mesh, &junction_of);
-                    (mesh, junction_of.clone(), JunctionVariant { wall, optimisation }, q)
-                })
-            })
-            .collect()
-    };
-    // Finishes whose junction wall grows along the normals smoothed only as elsewhere wait in
-    // reserve (see below).
-    let (mut built, mut reserve) = (Vec::new(), Vec::new());
-    let mut keep = |finishes: Vec<FinishedVolume>, built: &mut Vec<FinishedVolume>| {
-        let (normal, rest): (Vec<_>, Vec<_>) = finishes.into_iter().partition(|f| f.2.wall == JunctionWall::Normal);
-        built.extend(rest);
-        reserve.extend(normal);
-    };
-    keep(build_all(&optimisations, &walls), &mut built);
-    let best_of = |built: &[FinishedVolume]| {
-        (1..built.len()).fold(0, |best, i| if built[i].3.better_than(&built[best].3) { i } else { best })
-    };
-    // Every finish has had its poor elements optimised (`build_volume`), so the later rounds are
-    // for a vessel still short of a bar, not for a better finish within them: each costs about
-    // the time of the first.
-    let short_of_bars = |built: &[FinishedVolume]| !built[best_of(built)].3.meets_bars();
-    // Short of a bar, the same finishes on the transitions' surface quads smoothed first: the
-    // wall's mean rises (gmsh_aortic_arch at coarse: 0.80-0.83 after round 1, 0.870 with this
-    // one, within the bars where all three rounds were needed, and all three merged centres for
-    // the arch in cm), but the worst element can fall (the synthetic Y at 90 degrees and 1:1,
-    // within the bars either way: 0.50 -> 0.23), so a finish as projected that meets the bars
-    // is kept. The later rounds smooth too.
-    let smoothed = |o: &JunctionOptimisation| JunctionOptimisation { smooth_surface: true, ..*o };
-    if !junctions.is_empty() && short_of_bars(&built) {
-        keep(build_all(&optimisations.iter().map(smoothed).collect::<Vec<_>>(), &walls), &mut built);
-    }
-    // Still short, the same finishes again with the slower pattern search (the synthetic Y at
-    // 30 degrees and 4:1: 0.190 -> 0.293; it can also lose, hence both are kept in the running).
-    if !junctions.is_empty() && short_of_bars(&built) {
-        let searched: Vec<_> =
-            optimisations.iter().map(|o| JunctionOptimisation { pattern_search: true, ..smoothed(o) }).collect();
-        keep(build_all(&searched, &walls), &mut built);
-    }
-    // Still below: with the pages moving as well (their rims sliding), which gives a small
-    // branch's fold room where flat pages span the whole spine (the synthetic Y at 60 degrees and
-    // 4:1 goes from 0.234 to 0.350). Only then: bent pages reshape the crotch's lumen faces,
-    // which inflate unevenly (simvascular_demo_aortoiliac at coarse, whose junction the pattern
-    // search already takes past the target: a crotch face's area shrank by 24 % under pressure).
-    if !junctions.is_empty() && short_of_bars(&built) {
-        let pages: Vec<_> = [false, true]
-            .map(|pattern_search| JunctionOptimisation {
-                slide_surface_nodes: true,
-                pattern_search,
-                move_pages: true,
-                smooth_surface: true,
-            })
-            .to_vec();
-        keep(build_all(&pages, &walls), &mut built);
-    }
-    // Still short of a bar: every finish tried with the wall along the normals smoothed only as
-    // elsewhere in the vessel joins in (JunctionWall::Normal: a small branch's funnel;
-    // gmsh_aortic_arch at coarse, wall mean 0.833 -> 0.852). Only then: on
-    // simvascular_demo_aortoiliac at coarse, within every bar already, that wall would make a
-    // finish with moved pages the best one, and its crotch inflates unevenly (CalculiX stops: a
-    // fibre stretched past the exponential's range).
-    if !built[best_of(&built)].3.meets_bars() {
-        built.append(&mut reserve);
-    }
-    let chosen = best_of(&built);
-    let (mut mesh, junction_of, junction_variant, _) = built.into_iter().nth(chosen).expect("a variant");
+    let (mut mesh, junction_of, junction_variant) = finish_junctions(&inputs);
 
     progress.stage("annotation");
     annotate(&mut mesh);
     crate::sacs::mark_junction_sacs(&mut mesh, &junction_of, &junctions, &tree);
-    // The worst element is named (a degenerate one first), with how many are inverted in all:
-    // the first by number can be a near miss beside a fold hundreds of elements wide.
+    refuse_inverted(&mesh, &junction_of, &junctions, &tree, surface)?;
+
+    progress.stage("surface accuracy");
+    let aligned: Vec<Branch> = plans.into_iter().map(|p| p.branch).collect();
+    let accuracy = surface_accuracy(&mesh, lumen_surface, &aligned, &projected)?;
+    Ok(Meshed { mesh, tree, projected, accuracy, templates, junctions, junction_of, junction_variant, notes: vec![] })
+}
+
+/// Refuses a mesh with an inverted element, naming the worst (a degenerate one first), where
+/// it is (its junction, and why a junction folds) and how many are inverted in all: the first
+/// by number can be a near miss beside a fold hundreds of elements wide.
+fn refuse_inverted(
+    mesh: &VesselMesh,
+    junction_of: &[Option<usize>],
+    junctions: &[JunctionGeometry],
+    tree: &CenterlineTree,
+    surface: &TriangleSurface,
+) -> Result<()> {
     let inverted = |q: f64| q.is_nan() || q <= 0.0;
     let count = mesh.quality.iter().filter(|q| inverted(q.scaled_jacobian)).count();
     let rank = |q: f64| if q.is_nan() { f64::NEG_INFINITY } else { q };
@@ -880,8 +743,8 @@ pub fn mesh_tree(
         let c = crate::mesh::face_centre(&mesh.corners(e), 0);
         let (place, cause) = match junction_of[e] {
             Some(j) => (
-                format!(", in {},", junctions[j].describe(&tree)),
-                junctions[j].fold_cause(&tree, mesh.branch_of[e] as usize),
+                format!(", in {},", junctions[j].describe(tree)),
+                junctions[j].fold_cause(tree, mesh.branch_of[e] as usize),
             ),
             None => (
                 String::new(),
@@ -902,11 +765,7 @@ pub fn mesh_tree(
             q.scaled_jacobian
         )));
     }
-
-    progress.stage("surface accuracy");
-    let aligned: Vec<Branch> = plans.into_iter().map(|p| p.branch).collect();
-    let accuracy = surface_accuracy(&mesh, lumen_surface, &aligned, &projected)?;
-    Ok(Meshed { mesh, tree, projected, accuracy, templates, junctions, junction_of, junction_variant, notes: vec![] })
+    Ok(())
 }
 
 /// Everything `vesselhex mesh` was asked.
@@ -1540,7 +1399,7 @@ pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(Str
 
 #[cfg(test)]
 mod tests {
-    use super::{end_reports, ends_not_meshed, FinishQuality};
+    use super::{end_reports, ends_not_meshed};
     use crate::centerline::CenterlineTree;
     use crate::centerline_extract::{EndKind, VesselEnd};
     use crate::config::MeshConfig;
@@ -1576,27 +1435,5 @@ mod tests {
         let warnings = ends_not_meshed(&reports, &left_out, LengthUnit::Mm);
         assert!(warnings[0].message.contains("too close to its junction"), "{}", warnings[0].message);
         assert!(!warnings[0].message.contains("--ends"), "{}", warnings[0].message);
-    }
-
-    fn finish(worst: f64, worst_wall: f64, wall_mean: f64) -> FinishQuality {
-        FinishQuality { worst, worst_wall, wall_mean }
-    }
-
-    #[test]
-    fn a_finish_meeting_the_bars_beats_one_with_a_better_worst_element() {
-        let within = finish(0.21, 0.24, 0.852);
-        let wall_mean_below = finish(0.30, 0.40, 0.833);
-        let worst_below = finish(0.19, 0.50, 0.95);
-        assert!(within.meets_bars() && !wall_mean_below.meets_bars() && !worst_below.meets_bars());
-        assert!(within.better_than(&wall_mean_below) && within.better_than(&worst_below));
-        assert!(!wall_mean_below.better_than(&within));
-        // Both within: the worst element decides, then the worst wall element, then the mean.
-        assert!(finish(0.31, 0.3, 0.86).better_than(&finish(0.30, 0.9, 0.99)));
-        assert!(finish(0.30, 0.35, 0.86).better_than(&finish(0.30, 0.34, 0.99)));
-        assert!(finish(0.30, 0.35, 0.87).better_than(&finish(0.30, 0.35, 0.86)));
-        // Both below the same bar: the better worst element wins.
-        assert!(finish(0.15, 0.3, 0.9).better_than(&finish(0.10, 0.3, 0.9)));
-        // Equals: neither is better, so the first tried is kept.
-        assert!(!within.better_than(&within));
     }
 }
