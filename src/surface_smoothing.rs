@@ -7,7 +7,7 @@
 //! nodes are where the transitions' rays happen to hit the surface, crowded and sheared around
 //! the crotch. Evening them out on the surface raises the wall's mean and the lumen's near-wall
 //! cells with it (their outer faces are the same quads), so the first junction finish meets the
-//! bars where a search over a dozen finishes used to be needed (see `pipeline::mesh_tree`).
+//! bars where a search over a dozen finishes used to be needed (see `junction_finish::finish_junctions`).
 //!
 //! Evening out (Laplacian smoothing) spaces the nodes but leaves corners sheared where the
 //! quads' valences are irregular (around the pages' rims), so a shape optimisation on the

@@ -327,7 +327,7 @@ impl WallLayout<'_> {
         // thicken a cell, and the wall's crotch cells whose pyramids fail are thin ones (judged
         // with the pyramids, gmsh_carotid_bifurcation at medium kept them at -1 through every
         // round and took 2.7 times the CPU time). A finish whose wall fails a pyramid loses to one
-        // whose wall does not (see `pipeline::mesh_tree`'s judge).
+        // whose wall does not (see `junction_finish::judge`).
         improve_poor(nodes, wall_hexes, &wall_movable, self.inputs.surface, Validity::Corners);
     }
 }
@@ -357,7 +357,7 @@ pub(crate) const QUALITY_BAR_SJ: f64 = crate::quality::Bars::MIN_SCALED_JACOBIAN
 pub(crate) const WALL_MEAN_BAR_SJ: f64 = crate::quality::Bars::WALL_MEAN_SCALED_JACOBIAN;
 
 /// How a branched vessel's junctions are finished; the caller builds the variants and keeps
-/// the best (see `pipeline::mesh_tree`).
+/// the best (see `junction_finish::finish_junctions`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct JunctionVariant {
     pub wall: JunctionWall,
@@ -366,7 +366,7 @@ pub struct JunctionVariant {
 
 /// How the wall grows from the lumen-surface nodes of junction transitions when it grows along
 /// the normals ([`WallGrowth::Normal`]; along the rays it does so everywhere). The caller
-/// builds each on the same lumen and keeps the best (see `pipeline::mesh_tree`).
+/// builds each on the same lumen and keeps the best (see `junction_finish::finish_junctions`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum JunctionWall {
