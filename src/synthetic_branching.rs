@@ -300,22 +300,63 @@ impl SideBranches {
     }
 
     pub fn fixture(&self, name: &str) -> Result<BranchingFixture> {
+        let branches = (0..2)
+            .map(|i| SideBranch {
+                radius: self.branch_radii[i],
+                angle_deg: self.angles_deg[i],
+                azimuth_deg: self.azimuths_deg[i],
+                anchor_radii: (i as f64 - 0.5) * self.spacing_radii,
+            })
+            .collect();
+        let fan =
+            SideBranchFan { parent_radius: self.parent_radius, branches, free_length_radii: self.free_length_radii };
+        check_range(&format!("side branches '{name}'"), "anchor spacing (parent radii)", self.spacing_radii, 0.0, 1e3)?;
+        fan.fixture(name)
+    }
+}
+
+/// One side branch of a [`SideBranchFan`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SideBranch {
+    pub radius: f64,
+    /// Angle between the branch and the parent's downstream axis, degrees, in [10, 170].
+    pub angle_deg: f64,
+    /// Azimuth about the parent's axis, degrees (0: towards +x).
+    pub azimuth_deg: f64,
+    /// Where it leaves the parent's axis: z, in parent radii.
+    pub anchor_radii: f64,
+}
+
+/// Side branches leaving one parent close together, as an abdominal aorta's coeliac trunk,
+/// superior mesenteric and renal arteries do: the parent runs along +z (open at both ends),
+/// each branch leaves its axis at its anchor, at its angle from the downstream axis and its
+/// azimuth about it. Lengths in mm.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SideBranchFan {
+    pub parent_radius: f64,
+    pub branches: Vec<SideBranch>,
+    /// Free length of each tube end past its separation distance, in its own radii (at least 2).
+    pub free_length_radii: f64,
+}
+
+impl SideBranchFan {
+    pub fn fixture(&self, name: &str) -> Result<BranchingFixture> {
         let what = format!("side branches '{name}'");
         check_range(&what, "parent radius (mm)", self.parent_radius, 1e-6, 1e6)?;
-        check_range(&what, "anchor spacing (parent radii)", self.spacing_radii, 0.0, 1e3)?;
         let mut tubes = vec![parent_tube(self.parent_radius, TubeEnd::Open { length: 0.0 })];
-        for i in 0..2 {
+        for (i, b) in self.branches.iter().enumerate() {
             let branch = format!("branch {}", i + 1);
-            check_range(&what, &format!("radius of {branch} (mm)"), self.branch_radii[i], 1e-6, self.parent_radius)?;
-            check_range(&what, &format!("angle of {branch} (degrees)"), self.angles_deg[i], 10.0, 170.0)?;
-            let (a, phi) = (self.angles_deg[i].to_radians(), self.azimuths_deg[i].to_radians());
+            check_range(&what, &format!("radius of {branch} (mm)"), b.radius, 1e-6, self.parent_radius)?;
+            check_range(&what, &format!("angle of {branch} (degrees)"), b.angle_deg, 10.0, 170.0)?;
+            check_range(&what, &format!("anchor of {branch} (parent radii)"), b.anchor_radii, -1e3, 1e3)?;
+            let (a, phi) = (b.angle_deg.to_radians(), b.azimuth_deg.to_radians());
             // Exact zeros where the branch is grid-aligned (as `daughter_direction` does).
             let snap = |v: f64| if v.abs() < 1e-12 { 0.0 } else { v };
             tubes.push(Tube {
                 name: branch,
-                anchor: Point3::new(0.0, 0.0, (i as f64 - 0.5) * self.spacing_radii * self.parent_radius),
+                anchor: Point3::new(0.0, 0.0, b.anchor_radii * self.parent_radius),
                 direction: Vector3::new(snap(a.sin() * phi.cos()), snap(a.sin() * phi.sin()), snap(a.cos())),
-                radius: self.branch_radii[i],
+                radius: b.radius,
                 back: TubeEnd::Junction { length: 0.0 },
                 front: TubeEnd::Open { length: 0.0 },
             });

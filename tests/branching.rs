@@ -13,7 +13,9 @@ use vesselhex::mesh::face_nodes;
 use vesselhex::pipeline::{mesh_vessel, Meshed};
 use vesselhex::progress::Progress;
 use vesselhex::projection::BranchEnd;
-use vesselhex::synthetic_branching::{write_branching_fixture, SideBranches, TJunction, YBifurcation};
+use vesselhex::synthetic_branching::{
+    write_branching_fixture, SideBranch, SideBranchFan, SideBranches, TJunction, YBifurcation,
+};
 use vesselhex::units::LengthUnit;
 
 /// The bars.
@@ -326,6 +328,34 @@ fn close_side_branches_share_a_bridge() {
         assert_eq!(bridge.s_start, bridge.s_end, "{name}: the segment between the junctions is a bridge");
         assert!(bridge.sections.iter().all(|s| s.in_junction), "{name}: the bridge has no ordinary section");
         assert!(bridge.sections.len() >= 3, "{name}: the bridge has sections between its folds");
+        let f = check_all(&name, &m);
+        assert_bars(&name, &f);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Three side branches as the coeliac trunk and the two renal arteries leave an abdominal
+/// aorta: the trunk forward at 70 degrees from the downstream axis, the renals to either side
+/// at right angles 2.5 aortic radii further down. Two junctions (the trunk's, and the renals'
+/// shared by both) meet along the aorta; the vessel meshes conformal and within the bars at
+/// the coarse and the medium preset.
+#[test]
+fn coeliac_trunk_and_renal_arteries_mesh_within_the_bars() {
+    let dir = temp_dir("coeliac-renals");
+    let branch =
+        |radius, angle_deg, azimuth_deg, anchor_radii| SideBranch { radius, angle_deg, azimuth_deg, anchor_radii };
+    let fan = SideBranchFan {
+        parent_radius: 2.0,
+        branches: vec![branch(0.7, 70.0, 90.0, 0.0), branch(0.6, 90.0, 0.0, 2.5), branch(0.6, 90.0, 180.0, 2.5)],
+        free_length_radii: 4.0,
+    };
+    let written = write_branching_fixture(&fan.fixture("coeliac_renals").unwrap(), &dir).unwrap();
+    for preset in [Preset::Coarse, Preset::Medium] {
+        let name = format!("coeliac trunk and renal arteries, {preset:?}");
+        let m = mesh(&written.stl, &written.centerlines, LengthUnit::Mm, &MeshConfig::preset(preset));
+        let mut slots: Vec<usize> = m.junctions.iter().map(|j| j.slots.len()).collect();
+        slots.sort_unstable();
+        assert_eq!(slots, [3, 4], "{name}: the trunk's junction and the renals' shared one");
         let f = check_all(&name, &m);
         assert_bars(&name, &f);
     }
