@@ -129,10 +129,10 @@ pub fn build_volume(
     // optimised with them in the objective. By the corners alone, the optimisation flattened a
     // crotch cell of gmsh_bifurcation (medium) until its centre left its wall face's plane.
     improve_poor(&mut nodes, &elements.hexes, &poor_mobility, surface, Validity::CornersAndPyramids);
-    // A lumen still inverted here is a finish no wall can save (the vessel is refused unless
-    // another finish is valid, and a valid one beats it on the worst element), so its walls are
-    // grown but not optimised: the optimisation is most of a finish's time (the SPHinXsys arch
-    // at coarse: both finishes of the first round inverted, 2.0 s -> 1.6 s).
+    // A lumen still inverted here makes a finish that cannot be the mesh (the wall's
+    // optimisation never moves a lumen node, and a mesh with an inverted element is refused), so
+    // its walls are grown but not optimised: that optimisation is most of a finish's time (the
+    // SPHinXsys arch at coarse, both finishes of its first round inverted: 2.0 s -> 1.25 s).
     let lumen_valid = !elements.hexes.par_iter().any(|h| {
         let q = crate::quality::scaled_jacobian(&h.map(|n| nodes[n as usize]));
         q.is_nan() || q <= 0.0
