@@ -79,7 +79,8 @@ pub fn extend(mesh: &mut VesselMesh, config: &ExtensionsConfig) -> Result<Vec<Ex
         return Ok(Vec::new());
     }
     check_end_names(mesh, config)?;
-    let ends: Vec<VesselEnd> = mesh.ends.iter().filter(|e| config.extends(&e.name)).cloned().collect();
+    // `ends = "all"` passes over the side ends: they have no cross-section to sweep from.
+    let ends: Vec<VesselEnd> = mesh.ends.iter().filter(|e| config.extends(&e.name) && !e.side).cloned().collect();
     let mut reports = Vec::new();
     let mut wall = ExtensionWall::default();
     for end in &ends {
@@ -126,7 +127,7 @@ pub fn extend(mesh: &mut VesselMesh, config: &ExtensionsConfig) -> Result<Vec<Ex
 }
 
 /// Refuses end names the mesh does not have (in `ends` or `[extensions.length]`), listing those
-/// it has.
+/// it has, and ends that open in the side of the mesh (no cross-section to sweep from).
 fn check_end_names(mesh: &VesselMesh, config: &ExtensionsConfig) -> Result<()> {
     let known: Vec<&str> = mesh.ends.iter().map(|e| e.name.as_str()).collect();
     let named = match &config.ends {
@@ -134,10 +135,16 @@ fn check_end_names(mesh: &VesselMesh, config: &ExtensionsConfig) -> Result<()> {
         crate::config::ExtendedEnds::Keyword(_) => Vec::new(),
     };
     for (key, name) in named.into_iter().chain(config.length.keys().map(|n| ("extensions.length", n))) {
-        if !known.contains(&name.as_str()) {
+        let Some(end) = mesh.ends.iter().find(|e| e.name == *name) else {
             return Err(Error::Config(format!(
                 "{key}: the mesh has no end named '{name}'; its ends are {}",
                 known.join(", ")
+            )));
+        };
+        if end.side {
+            return Err(Error::Config(format!(
+                "{key}: end '{name}' opens in the side of the mesh (a short capped branch meshed with its \
+                 neighbour), with no cross-section to sweep a flow extension from; leave it out of {key}"
             )));
         }
     }

@@ -2,7 +2,9 @@
 //! take: refinement before or after projection ([`crate::refinement`]), walls from segmented
 //! surfaces ([`crate::wall_surfaces`]) and flow extensions ([`crate::extensions`]), in that order
 //! (the extensions are swept from the finished vessel, whose labels they keep). Each runs only
-//! when its settings ask for it: the default mesh is the volume stage's, untouched.
+//! when its settings ask for it: the default mesh is the volume stage's, untouched. Before the
+//! extensions, the ends of branches too short to mesh are opened in the side of the mesh when
+//! the pipeline asks ([`crate::side_ends`]).
 
 use crate::config::MeshConfig;
 use crate::error::Result;
@@ -12,6 +14,7 @@ use crate::mesh::VesselMesh;
 use crate::meshed::Meshed;
 use crate::progress::Progress;
 use crate::refinement::{Placement, RefinementReport};
+use crate::side_ends::{open_side_end, SideEndReport, SideOpening};
 use crate::surface::LumenSurface;
 use crate::wall_surfaces::{WallSurface, WallSurfacesReport};
 use serde::Serialize;
@@ -26,6 +29,8 @@ pub struct Additions {
     pub wall_surfaces: Option<WallSurfacesReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub extensions: Option<Vec<ExtensionReport>>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub side_ends: Vec<SideEndReport>,
 }
 
 impl Additions {
@@ -42,6 +47,7 @@ impl Additions {
             e.blend_length *= scale;
             e.end_centre = e.end_centre.map(|x| x * scale);
         }
+        self.side_ends = self.side_ends.into_iter().map(|s| s.scaled(scale)).collect();
         self
     }
 }
@@ -61,29 +67,31 @@ pub fn stages(config: &MeshConfig) -> u64 {
         .count() as u64
 }
 
-/// Runs the added stages asked for on a finished mesh of `surface`.
+/// Runs the added stages asked for on a finished mesh of `surface`, opening `side_ends` before
+/// the extensions (an opening no lumen face lies on is left out of `Additions::side_ends`).
 pub fn finish(
     meshed: &mut Meshed,
     surface: &TriangleSurface,
     config: &MeshConfig,
     limits: &ReadLimits,
     progress: &mut Progress,
+    side_ends: &[SideOpening],
 ) -> Result<Additions> {
     check_wall_surfaces(config)?;
     let mut additions = Additions::default();
-    if !asked(config) {
-        return Ok(additions);
-    }
-    let lumen = LumenSurface::new(surface)?;
     let r = &config.refinement;
-    if r.before_projection > 1 || r.after_projection > 1 {
-        progress.stage("refinement");
-        additions.refinement = Some(refine_stage(meshed, &lumen, config)?);
+    if r.before_projection > 1 || r.after_projection > 1 || config.wall.surface.is_some() {
+        let lumen = LumenSurface::new(surface)?;
+        if r.before_projection > 1 || r.after_projection > 1 {
+            progress.stage("refinement");
+            additions.refinement = Some(refine_stage(meshed, &lumen, config)?);
+        }
+        if let Some(outer) = &config.wall.surface {
+            progress.stage("wall surfaces");
+            additions.wall_surfaces = Some(wall_stage(meshed, &lumen, outer, config, limits)?);
+        }
     }
-    if let Some(outer) = &config.wall.surface {
-        progress.stage("wall surfaces");
-        additions.wall_surfaces = Some(wall_stage(meshed, &lumen, outer, config, limits)?);
-    }
+    additions.side_ends = side_ends.iter().filter_map(|o| open_side_end(meshed, o)).collect();
     if config.extensions.is_on() {
         progress.stage("flow extensions");
         let reports = crate::extensions::extend(&mut meshed.mesh, &config.extensions)?;

@@ -32,6 +32,7 @@ pub mod refinement;
 pub mod report;
 pub mod resources;
 pub mod sacs;
+pub mod side_ends;
 pub mod surface;
 pub mod surface_smoothing;
 pub mod synthetic;

@@ -163,6 +163,10 @@ pub struct VesselEnd {
     /// Centre of the end section and its unit normal pointing out of the vessel.
     pub centre: Point3<f64>,
     pub outward_normal: Vector3<f64>,
+    /// Whether the end opens in the side of the mesh (see [`crate::side_ends`]): its lumen
+    /// faces are a patch of the lumen surface on the vessel's cap, not a cross-section, so no
+    /// flow extension is swept from it.
+    pub side: bool,
 }
 
 /// Well-known node-set names (always present in a mesh built by vesselhex).

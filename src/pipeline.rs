@@ -29,6 +29,7 @@ use crate::report::{
     bar_warnings, lumen_report, wall_report, BranchReport, EndReport, InputReport, JunctionReport, Report, Warning,
 };
 use crate::resources::short;
+use crate::side_ends::SideOpening;
 use crate::surface::LumenSurface;
 use crate::units::LengthUnit;
 use crate::volume::{JunctionWall, RadialLevels, VolumeInputs};
@@ -950,9 +951,16 @@ const MESHED_END_REACH: f64 = 2.0;
 /// ... or this many of the branch's own radii there (an end given as a bare point).
 const MESHED_END_BRANCH_RADII: f64 = 1.0;
 
-/// Every end with whether a branch of the mesh ends at it (see [`MESHED_END_REACH`]), in the
-/// output unit (`scale` per mm).
-fn end_reports(ends: &[VesselEnd], inlet: usize, tree: &CenterlineTree, scale: f64) -> Vec<EndReport> {
+/// Every end with whether a branch of the mesh ends at it (see [`MESHED_END_REACH`]) or it
+/// opens in the side of the mesh (`side_ends`: their centres, mm), in the output unit (`scale`
+/// per mm).
+fn end_reports(
+    ends: &[VesselEnd],
+    inlet: usize,
+    tree: &CenterlineTree,
+    side_ends: &[[f64; 3]],
+    scale: f64,
+) -> Vec<EndReport> {
     let terminals: Vec<&CenterlineSample> = tree_terminals(tree).collect();
     ends.iter()
         .enumerate()
@@ -961,9 +969,10 @@ fn end_reports(ends: &[VesselEnd], inlet: usize, tree: &CenterlineTree, scale: f
             radius: e.radius * scale,
             kind: e.kind.name(),
             inlet: k == inlet,
-            meshed: terminals.iter().any(|t| {
-                (t.point - e.centre).norm() <= (MESHED_END_REACH * e.radius).max(MESHED_END_BRANCH_RADII * t.radius)
-            }),
+            meshed: side_ends.contains(&e.centre.into())
+                || terminals.iter().any(|t| {
+                    (t.point - e.centre).norm() <= (MESHED_END_REACH * e.radius).max(MESHED_END_BRANCH_RADII * t.radius)
+                }),
         })
         .collect()
 }
@@ -1165,7 +1174,7 @@ pub fn mesh_finished(
     let mut progress = Progress::new(true, 9 + crate::finishing::stages(config));
     let mut meshed = mesh_vessel(surface, centerlines, config, &mut progress)?;
     let additions =
-        crate::finishing::finish(&mut meshed, surface, config, &ReadLimits::within(max_memory), &mut progress)?;
+        crate::finishing::finish(&mut meshed, surface, config, &ReadLimits::within(max_memory), &mut progress, &[])?;
     Ok((meshed, additions))
 }
 
@@ -1250,7 +1259,7 @@ pub fn mesh_surface(
     crate::finishing::scale_estimate(&mut estimate, config);
     crate::resources::check_fits(&estimate, settings.max_memory, &centerline_source)?;
     let tree_config = keep_extracted_ends(config, found_ends.as_ref());
-    let mut left_out_mm = vec![];
+    let mut short_branches = vec![];
     let attempt = mesh_vessel(&surface, &centerlines, &tree_config, progress);
     let (mut meshed, centerlines) = match attempt {
         Ok(meshed) => (meshed, centerlines),
@@ -1273,18 +1282,11 @@ pub fn mesh_surface(
         }
         // A branch found on the surface that ends too close to its junction for the junction's
         // transition (a short capped stub in an aorto-iliac's crotch) does not cost the rest: the
-        // vessel is meshed without it, and its end is said not meshed (report.json, exit 3).
+        // vessel is meshed without it, its stretch meshed with its neighbour's lumen, and its
+        // cap opened in the side of the mesh (see `crate::side_ends`).
         Err(Error::ShortBranch { message, end_mm }) if found_ends.is_some() && centerlines.polylines.len() > 2 => {
-            let [x, y, z] = end_mm;
-            settings.warnings.push(Warning::new(
-                "branch_not_meshed",
-                format!(
-                    "the vessel is meshed without its branch to the end at ({x:.3}, {y:.3}, {z:.3}) mm; with it: \
-                     {message}"
-                ),
-            ));
             let centerlines = without_paths_to(&centerlines, &[end_mm]);
-            left_out_mm.push(end_mm);
+            short_branches.push((end_mm, message));
             let meshed =
                 mesh_vessel(&surface, &centerlines, &tree_config, progress).map_err(|e| name_winding(e, &surface))?;
             (meshed, centerlines)
@@ -1292,8 +1294,36 @@ pub fn mesh_surface(
         Err(e) => return Err(name_winding(e, &surface)),
     };
     settings.warnings.append(&mut meshed.notes);
+    let openings = side_openings(&surface, found_ends.as_ref().map_or(&[][..], |(e, _)| e), &short_branches);
     let limits = ReadLimits::within(settings.max_memory);
-    let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress)?;
+    let asked: Vec<SideOpening> = openings.iter().flatten().copied().collect();
+    let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress, &asked)?;
+    let mut left_out_mm = vec![];
+    for ((end_mm, message), opening) in short_branches.into_iter().zip(&openings) {
+        let [x, y, z] = end_mm;
+        let opened = opening.and_then(|o| additions.side_ends.iter().find(|s| s.centre == <[f64; 3]>::from(o.centre)));
+        settings.warnings.push(match opened {
+            Some(s) => Warning::new(
+                "side_end",
+                format!(
+                    "the end at ({x:.3}, {y:.3}, {z:.3}) mm is meshed as {}, an opening in the side of the mesh: {} \
+                     lumen faces on its cap ({:.1} of its {:.1} mm2), its branch meshed with its neighbour's lumen, \
+                     without an O-grid of its own, and the wall open over it. Its branch could not have its own: {message}",
+                    s.end, s.faces, s.area, s.cap_area
+                ),
+            ),
+            None => {
+                left_out_mm.push(end_mm);
+                Warning::new(
+                    "branch_not_meshed",
+                    format!(
+                        "the vessel is meshed without its branch to the end at ({x:.3}, {y:.3}, {z:.3}) mm; with it: \
+                         {message}"
+                    ),
+                )
+            }
+        });
+    }
     let (ends, inlet) = found_ends.unwrap_or_else(|| tree_ends(&meshed.tree));
     Ok(MeshedVessel {
         meshed,
@@ -1307,6 +1337,26 @@ pub fn mesh_surface(
         settings,
         left_out_mm,
     })
+}
+
+/// Where each short branch's end (its far end, mm) may open in the side of the mesh (see
+/// [`crate::side_ends`]): the end found nearest it, when that end is a flat cap.
+fn side_openings(
+    surface: &TriangleSurface,
+    ends: &[VesselEnd],
+    short_branches: &[([f64; 3], String)],
+) -> Vec<Option<SideOpening>> {
+    short_branches
+        .iter()
+        .map(|(end_mm, _)| {
+            let gap = |e: &VesselEnd| (e.centre - Point3::from(*end_mm)).norm();
+            let end = ends.iter().min_by(|a, b| gap(a).total_cmp(&gap(b)))?;
+            match end.kind {
+                EndKind::Cap { .. } => SideOpening::of_cap(surface, end.centre, end.radius),
+                _ => None,
+            }
+        })
+        .collect()
 }
 
 /// The centerlines without the paths to `points`: for each point, the polyline whose last point
@@ -1388,7 +1438,8 @@ pub fn write_vessel(
 /// writing anything (no outputs listed); timings as given.
 pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(String, f64)]) -> Report {
     let mut warnings = vessel.settings.warnings.clone();
-    let ends = end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, config.output_units.from_mm());
+    let side_ends: Vec<[f64; 3]> = vessel.additions.side_ends.iter().map(|s| s.centre).collect();
+    let ends = end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, &side_ends, config.output_units.from_mm());
     let left_out = ends_left_out(&vessel.ends, &vessel.left_out_mm);
     warnings.extend(ends_not_meshed(&ends, &left_out, config.output_units));
     warnings.extend(ends_cut_short(&vessel.meshed, config));
@@ -1424,7 +1475,7 @@ mod tests {
         let tree = CenterlineTree::build(&centerlines, &MeshConfig::default().centerline, None).unwrap();
         let end = |x: f64, z: f64, kind| VesselEnd { centre: Point3::new(x, 0.0, z), radius: 2.0, kind };
         let ends = [end(0.0, 0.0, EndKind::Open), end(0.0, 31.0, EndKind::Dome), end(20.0, 15.0, EndKind::Open)];
-        let reports = end_reports(&ends, 0, &tree, 1.0);
+        let reports = end_reports(&ends, 0, &tree, &[], 1.0);
         let meshed: Vec<bool> = reports.iter().map(|e| e.meshed).collect();
         assert_eq!(meshed, [true, true, false]);
         assert!(reports[0].inlet && !reports[1].inlet && reports[1].kind == "dome");

@@ -121,26 +121,60 @@ pub fn face_pyramids(c: &[Point3<f64>; 8]) -> [f64; 6] {
 /// The six face pyramids of [`face_pyramids`], or `None` for a cell without positive volume
 /// (whose pyramids have no sixth of a volume to be measured by).
 pub fn face_pyramids_of_positive_volume(c: &[Point3<f64>; 8]) -> Option<[f64; 6]> {
-    let mut centres = [Vector3::zeros(); 6];
-    let mut areas = [Vector3::zeros(); 6];
-    for (f, face) in HEX_FACES.iter().enumerate() {
-        let p = face.map(|i| c[i]);
-        centres[f] = polygon_centre(&p.map(|q| q.coords));
-        areas[f] = crate::mesh::quad_area_vector(p);
+    let cell = OpenFoamCell::of(c)?;
+    Some(std::array::from_fn(|f| 6.0 * cell.areas[f].dot(&(cell.centres[f] - cell.centre)) / cell.volume3))
+}
+
+/// OpenFOAM's skewness of face `f` of a hexahedron were it a boundary face (`primitiveMeshTools::
+/// boundaryFaceSkewness`, v1912): how far the cell's centre projects beside the face's centre,
+/// over the face's reach in that direction (at least 0.4 of the centre's distance to the face).
+/// checkMesh fails a face above 4. A face between two cells is judged by both cells' centres
+/// instead, so a face fine inside a mesh may fail once it is a boundary (an opening's rim, see
+/// [`crate::side_ends`]). Infinite for a cell without positive volume.
+pub fn boundary_face_skewness(c: &[Point3<f64>; 8], f: usize) -> f64 {
+    let Some(cell) = OpenFoamCell::of(c) else { return f64::INFINITY };
+    let (centre, area) = (cell.centres[f], cell.areas[f]);
+    let normal = area / area.norm();
+    let to_face = centre - cell.centre;
+    let along = normal * normal.dot(&to_face);
+    let beside = to_face - along;
+    let direction = beside.try_normalize(1e-300).unwrap_or_else(Vector3::zeros);
+    let reach =
+        HEX_FACES[f].iter().map(|&i| direction.dot(&(c[i].coords - centre)).abs()).fold(0.4 * along.norm(), f64::max);
+    beside.norm() / reach
+}
+
+/// A hexahedron's face centres, area vectors and centre as OpenFOAM computes them, and three
+/// times its volume (positive).
+struct OpenFoamCell {
+    centres: [Vector3<f64>; 6],
+    areas: [Vector3<f64>; 6],
+    centre: Vector3<f64>,
+    volume3: f64,
+}
+
+impl OpenFoamCell {
+    fn of(c: &[Point3<f64>; 8]) -> Option<OpenFoamCell> {
+        let mut centres = [Vector3::zeros(); 6];
+        let mut areas = [Vector3::zeros(); 6];
+        for (f, face) in HEX_FACES.iter().enumerate() {
+            let p = face.map(|i| c[i]);
+            centres[f] = polygon_centre(&p.map(|q| q.coords));
+            areas[f] = crate::mesh::quad_area_vector(p);
+        }
+        let estimate = (centres[0] + centres[1] + centres[2] + centres[3] + centres[4] + centres[5]) / 6.0;
+        // Three times each pyramid's volume from the estimate, and their centroids: the cell centre.
+        let (mut weighted, mut volume3) = (Vector3::zeros(), 0.0);
+        for (centre, area) in centres.iter().zip(&areas) {
+            let v = area.dot(&(centre - estimate));
+            weighted += (centre * 0.75 + estimate * 0.25) * v;
+            volume3 += v;
+        }
+        if volume3.is_nan() || volume3 <= 0.0 {
+            return None;
+        }
+        Some(OpenFoamCell { centres, areas, centre: weighted / volume3, volume3 })
     }
-    let estimate = (centres[0] + centres[1] + centres[2] + centres[3] + centres[4] + centres[5]) / 6.0;
-    // Three times each pyramid's volume from the estimate, and their centroids: the cell centre.
-    let (mut weighted, mut volume3) = (Vector3::zeros(), 0.0);
-    for (centre, area) in centres.iter().zip(&areas) {
-        let v = area.dot(&(centre - estimate));
-        weighted += (centre * 0.75 + estimate * 0.25) * v;
-        volume3 += v;
-    }
-    if volume3.is_nan() || volume3 <= 0.0 {
-        return None;
-    }
-    let cell_centre = weighted / volume3;
-    Some(std::array::from_fn(|f| 6.0 * areas[f].dot(&(centres[f] - cell_centre)) / volume3))
 }
 
 /// What the optimisers count as an element's validity.
@@ -246,6 +280,20 @@ impl Stats {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+
+    /// OpenFOAM's boundary skewness of the bottom face of a cube sheared by t along x (its top
+    /// moved by t): the centre lies t/2 beside the face's centre, whose reach that way is 1/2.
+    #[test]
+    fn boundary_skewness_of_a_sheared_cube_is_its_shear() {
+        for t in [0.0, 0.5, 2.0, 5.0] {
+            let mut c = crate::mesh::unit_cube();
+            for p in &mut c[4..] {
+                p.x += t;
+            }
+            let s = boundary_face_skewness(&c, crate::mesh::FACE_UPSTREAM);
+            assert!((s - t).abs() < 1e-12, "shear {t}: skewness {s}");
+        }
+    }
 
     /// The skew from all 24 angles, as it was computed before only the extreme cosines were.
     fn skew_of_every_angle(c: &[Point3<f64>; 8]) -> f64 {

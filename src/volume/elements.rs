@@ -277,6 +277,7 @@ pub(super) fn vessel_end_sets(
                 branch: b,
                 centre: station.point,
                 outward_normal: if end.is_inlet { -t } else { t },
+                side: false,
             }
         })
         .collect()
