@@ -70,6 +70,32 @@ pub fn face_nodes(hex: &Hex, f: usize) -> [u32; 4] {
     [hex[t[0]], hex[t[1]], hex[t[2]], hex[t[3]]]
 }
 
+/// Face `f` of `hex` as a key: its nodes sorted, the same whichever of its two elements lists it.
+pub fn face_key(hex: &Hex, f: usize) -> [u32; 4] {
+    let mut k = face_nodes(hex, f);
+    k.sort_unstable();
+    k
+}
+
+/// The wall's columns: the wall element standing on each face (by [`face_key`]), each one on
+/// the lumen's face or on the outer face of the one below it.
+pub struct WallColumns {
+    standing_on: std::collections::HashMap<[u32; 4], usize>,
+}
+
+impl WallColumns {
+    pub fn new(mesh: &VesselMesh) -> WallColumns {
+        WallColumns { standing_on: mesh.wall_range().map(|e| (face_key(&mesh.hexes[e], FACE_INNER), e)).collect() }
+    }
+
+    /// The wall elements standing on `face` (a [`face_key`]), from the intima outwards.
+    pub fn above<'a>(&'a self, mesh: &'a VesselMesh, face: [u32; 4]) -> impl Iterator<Item = usize> + 'a {
+        std::iter::successors(self.standing_on.get(&face).copied(), move |&e| {
+            self.standing_on.get(&face_key(&mesh.hexes[e], FACE_OUTER)).copied()
+        })
+    }
+}
+
 /// Whether a branch of this name is a saccular aneurysm's sac, closed by a dome (the pipeline
 /// names them "sac", or "sac_1", "sac_2", ...).
 pub fn is_sac(branch_name: &str) -> bool {

@@ -10,7 +10,7 @@
 
 use crate::centerline::CenterlineTree;
 use crate::junction::JunctionGeometry;
-use crate::mesh::{closest_on_segment, face_nodes, VesselMesh, FACE_INNER, FACE_OUTER};
+use crate::mesh::{closest_on_segment, face_key, VesselMesh, WallColumns, FACE_OUTER};
 use nalgebra::{Point3, Vector3};
 use std::collections::HashMap;
 
@@ -81,18 +81,14 @@ pub fn mark_junction_sacs(
             marked.push(e);
         }
     }
-    // Up through the wall: each wall element stands on the outer face of the one below it.
-    let key = |mut q: [u32; 4]| {
-        q.sort_unstable();
-        q
-    };
-    let standing_on: HashMap<[u32; 4], usize> =
-        mesh.wall_range().map(|e| (key(face_nodes(&mesh.hexes[e], FACE_INNER)), e)).collect();
-    while let Some(e) = marked.pop() {
+    // Up through the wall, over the outer face of each marked lumen element.
+    let columns = WallColumns::new(mesh);
+    let in_sac: Vec<usize> = marked
+        .iter()
+        .flat_map(|&e| std::iter::once(e).chain(columns.above(mesh, face_key(&mesh.hexes[e], FACE_OUTER))))
+        .collect();
+    for e in in_sac {
         mesh.sac[e] = true;
-        if let Some(&above) = standing_on.get(&key(face_nodes(&mesh.hexes[e], FACE_OUTER))) {
-            marked.push(above);
-        }
     }
 }
 

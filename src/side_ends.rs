@@ -13,7 +13,7 @@
 
 use crate::input::TriangleSurface;
 use crate::mesh::{
-    face_centre, face_nodes, quad_area_vector, sets, ElementFace, Region, VesselEnd, VesselMesh, FACE_INNER, FACE_OUTER,
+    face_centre, face_key, face_nodes, quad_area_vector, sets, ElementFace, Region, VesselEnd, VesselMesh, WallColumns,
 };
 use crate::meshed::Meshed;
 use crate::quality::boundary_face_skewness;
@@ -159,13 +159,6 @@ fn faces_on_cap(mesh: &VesselMesh, opening: &SideOpening) -> Vec<ElementFace> {
     mesh.face_sets[sets::LUMEN_WALL_FACES].iter().filter(on_cap).copied().collect()
 }
 
-/// A face's nodes as a key, whichever element lists it.
-fn face_key(mesh: &VesselMesh, element: usize, face: usize) -> [u32; 4] {
-    let mut k = face_nodes(&mesh.hexes[element], face);
-    k.sort_unstable();
-    k
-}
-
 /// The part of `patch` whose opening keeps every boundary face it makes within
 /// [`MAX_SKEWNESS`]: the patch, the wall elements over it (by element) and the wall's rim
 /// around it. A face of the patch too skewed, or whose column leaves a rim face too skewed, is
@@ -177,11 +170,12 @@ fn opening_within_skewness(
 ) -> Option<(Vec<ElementFace>, Vec<bool>, Vec<ElementFace>)> {
     let skewness = |f: &ElementFace| boundary_face_skewness(&mesh.corners(f.element as usize), f.face as usize);
     patch.retain(|f| skewness(f) <= MAX_SKEWNESS);
+    let columns = WallColumns::new(mesh);
     loop {
         if patch.is_empty() {
             return None;
         }
-        let column = wall_columns_over(mesh, &patch);
+        let column = wall_columns_over(mesh, &columns, &patch);
         let rim = wall_faces_around(mesh, &column);
         let mut given_back: Vec<usize> = rim
             .iter()
@@ -204,17 +198,12 @@ fn opening_within_skewness(
 }
 
 /// The wall's columns over `patch` (lumen faces): for each wall element, the patch face whose
-/// column it stands in, if any: from the intima's element on each face outwards, each next
-/// element on the last one's outer face.
-fn wall_columns_over(mesh: &VesselMesh, patch: &[ElementFace]) -> Vec<Option<usize>> {
-    let wall = mesh.wall_range();
-    let on_inner: HashMap<[u32; 4], usize> = wall.clone().map(|e| (face_key(mesh, e, FACE_INNER), e)).collect();
+/// column it stands in, if any.
+fn wall_columns_over(mesh: &VesselMesh, columns: &WallColumns, patch: &[ElementFace]) -> Vec<Option<usize>> {
     let mut column = vec![None; mesh.hexes.len()];
     for (k, f) in patch.iter().enumerate() {
-        let mut key = face_key(mesh, f.element as usize, f.face as usize);
-        while let Some(&e) = on_inner.get(&key) {
+        for e in columns.above(mesh, face_key(&mesh.hexes[f.element as usize], f.face as usize)) {
             column[e] = Some(k);
-            key = face_key(mesh, e, FACE_OUTER);
         }
     }
     column
@@ -226,7 +215,7 @@ fn wall_faces_around(mesh: &VesselMesh, column: &[Option<usize>]) -> Vec<(Elemen
     let mut removed_faces: HashMap<[u32; 4], usize> = HashMap::new();
     for e in mesh.wall_range().filter(|&e| column[e].is_some()) {
         for f in 0..6 {
-            removed_faces.insert(face_key(mesh, e, f), e);
+            removed_faces.insert(face_key(&mesh.hexes[e], f), e);
         }
     }
     let mut rim: Vec<(ElementFace, usize)> = mesh
@@ -234,7 +223,7 @@ fn wall_faces_around(mesh: &VesselMesh, column: &[Option<usize>]) -> Vec<(Elemen
         .filter(|&e| column[e].is_none())
         .flat_map(|e| (0..6).map(move |f| (e, f)))
         .filter_map(|(e, f)| {
-            let beside = *removed_faces.get(&face_key(mesh, e, f))?;
+            let beside = *removed_faces.get(&face_key(&mesh.hexes[e], f))?;
             Some((ElementFace { element: e as u32, face: f as u8 }, beside))
         })
         .collect();
@@ -315,7 +304,7 @@ mod tests {
     use std::collections::HashSet;
 
     fn key(mesh: &VesselMesh, f: &ElementFace) -> [u32; 4] {
-        face_key(mesh, f.element as usize, f.face as usize)
+        face_key(&mesh.hexes[f.element as usize], f.face as usize)
     }
 
     /// A flat "cap" 1 mm across on the side of a straight tube (radius 2 mm) opened as an end:
@@ -344,7 +333,7 @@ mod tests {
         let mut count: HashMap<[u32; 4], usize> = HashMap::new();
         for e in 0..mesh.hexes.len() {
             for f in 0..6 {
-                *count.entry(face_key(mesh, e, f)).or_default() += 1;
+                *count.entry(face_key(&mesh.hexes[e], f)).or_default() += 1;
             }
         }
         assert!(count.values().all(|&c| c <= 2));
