@@ -15,9 +15,8 @@ use crate::input::{
     TriangleSurface,
 };
 use crate::junction::{
-    allowed_turns, analyse_junctions, branch_core_dims, check_junction_spacing, equal_cells, find_junction_overlap,
-    fold_normal, keep_fold_cores_inside, signed_angle, twist_frames, unanalysable_close_junction, FoldEnd,
-    JunctionGeometry,
+    allowed_turns, analyse_junctions, check_junction_spacing, find_junction_overlap, keep_fold_cores_inside,
+    signed_angle, twist_frames, unanalysable_close_junction, FoldEnd, JunctionGeometry, LayoutPolicy,
 };
 use crate::junction_finish::{finish_junctions, FinishQuality};
 use crate::mesh::VesselMesh;
@@ -105,7 +104,7 @@ fn plan_branches<'a>(
             let end = end.map(|(j, slot, l)| (j, slot, l.expect("only a branch between two junctions is a bridge")));
             let turn_needed = |s: f64, j: usize, q: u8| {
                 let f = branch.at(s).frame;
-                let want = fold_normal(&junctions[j].axis, &f.tangent, q);
+                let want = junctions[j].fold_normal(junctions[j].slot_of(b), &f.tangent, q);
                 signed_angle(&f.normal, &want, &f.tangent)
             };
             let s0 = start.map_or(0.0, |(_, _, l)| l);
@@ -146,8 +145,8 @@ fn plan_branches<'a>(
             Ok(BranchPlan {
                 branch,
                 caps,
-                start: start.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, 0, setup.template), l)),
-                end: end.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, q_end, setup.template), l)),
+                start: start.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, 0), l)),
+                end: end.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, q_end), l)),
             })
         })
         .collect()
@@ -383,20 +382,47 @@ pub fn mesh_vessel(
     progress.stage("surface index");
     let lumen_surface = LumenSurface::new(surface)?;
     check_centerline_file(&lumen_surface, centerlines)?;
+    // Books first (a straight spine shared by every branch is the best-shaped fold where it
+    // orders the branches); only where one was refused for that, the vessel again with sectors
+    // at the junctions no book orders.
+    let books = LayoutPolicy::books_only();
+    let meshed = mesh_vessel_laid_out(surface, &lumen_surface, centerlines, config, &books, progress);
+    if meshed.is_ok() || !books.book_refused.get() {
+        return meshed;
+    }
+    mesh_vessel_laid_out(surface, &lumen_surface, centerlines, config, &LayoutPolicy::with_sectors(), progress)
+}
+
+/// [`mesh_vessel`] with the junctions' arrangements `policy` allows.
+fn mesh_vessel_laid_out(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    policy: &LayoutPolicy,
+    progress: &mut Progress,
+) -> Result<Meshed> {
     progress.stage("centerline");
-    let tree = CenterlineTree::build(centerlines, &config.centerline, Some(&lumen_surface))?;
-    let overlap = match analyse_junctions(&tree, &lumen_surface) {
-        Ok(junctions) => find_junction_overlap(&tree, &junctions, &lumen_surface),
-        Err(e) => Some(unanalysable_close_junction(&tree, &lumen_surface).ok_or(e)?),
+    let tree = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))?;
+    // A junction no book orders and another within two of its radii are one junction in fact:
+    // merged (with sectors allowed too, where the merged junction may be laid out in them).
+    let overlap = match analyse_junctions(&tree, lumen_surface, policy) {
+        Ok(junctions) => policy
+            .sectors
+            .then(|| unanalysable_close_junction(&tree, lumen_surface))
+            .flatten()
+            .or_else(|| find_junction_overlap(&tree, &junctions, lumen_surface)),
+        Err(e) => Some(unanalysable_close_junction(&tree, lumen_surface).ok_or(e)?),
     };
     let coarser = coarser_junctions(config, centerlines);
     let Some(overlap) = overlap else {
         let close_merges = tree.close_merges.clone();
-        let meshed = mesh_tree_recentred(surface, &lumen_surface, tree, centerlines, config, &close_merges, progress);
+        let meshed =
+            mesh_tree_recentred(surface, lumen_surface, tree, centerlines, config, &close_merges, policy, progress);
         let (Err(Error::Geometry(refusal)), Some(coarser)) = (&meshed, coarser) else { return meshed };
-        let tree = CenterlineTree::build(centerlines, &config.centerline, Some(&lumen_surface))?;
+        let tree = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))?;
         let mut retried =
-            mesh_tree_recentred(surface, &lumen_surface, tree, centerlines, &coarser, &close_merges, progress)
+            mesh_tree_recentred(surface, lumen_surface, tree, centerlines, &coarser, &close_merges, policy, progress)
                 .map_err(|_| Error::Geometry(refusal.clone()))?;
         retried.notes.push(junction_spacing_note(
             config,
@@ -414,8 +440,8 @@ pub fn mesh_vessel(
     let mut best: Option<(Meshed, FinishQuality)> = None;
     let mut first_error = None;
     for at in MERGED_CENTRE_AT {
-        let attempt = merged_tree(centerlines, merged_config, &lumen_surface, segment, at).and_then(|tree| {
-            mesh_tree(surface, &lumen_surface, tree, &centerlines.source, merged_config, false, progress)
+        let attempt = merged_tree(centerlines, merged_config, lumen_surface, segment, at, policy).and_then(|tree| {
+            mesh_tree(surface, lumen_surface, tree, &centerlines.source, merged_config, false, policy, progress)
         });
         match attempt {
             Ok(meshed) => {
@@ -511,13 +537,14 @@ fn mesh_tree_recentred(
     centerlines: &Centerlines,
     config: &MeshConfig,
     close_merges: &[usize],
+    policy: &LayoutPolicy,
     progress: &mut Progress,
 ) -> Result<Meshed> {
-    let meshed = mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, true, progress);
+    let meshed = mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, true, policy, progress);
     if close_merges.is_empty() || meshed.as_ref().is_ok_and(|m| FinishQuality::of_mesh(&m.mesh).meets_bars()) {
         return meshed;
     }
-    recentre_close_merges(surface, lumen_surface, centerlines, config, meshed, close_merges, progress)
+    recentre_close_merges(surface, lumen_surface, centerlines, config, meshed, close_merges, policy, progress)
 }
 
 /// Which branches end blind in a saccular aneurysm's sac (see [`ends_in_sac`]), each renamed
@@ -550,6 +577,7 @@ fn recentre_close_merges(
     config: &MeshConfig,
     meshed: Result<Meshed>,
     close_merges: &[usize],
+    policy: &LayoutPolicy,
     progress: &mut Progress,
 ) -> Result<Meshed> {
     let mut best = meshed.as_ref().ok().map(|m| FinishQuality::of_mesh(&m.mesh));
@@ -557,7 +585,9 @@ fn recentre_close_merges(
     for at in MERGED_CENTRE_AT {
         let forced: Vec<ForcedMerge> = close_merges.iter().map(|&segment| ForcedMerge { segment, at }).collect();
         let attempt = CenterlineTree::build_merging(centerlines, &config.centerline, Some(lumen_surface), &forced)
-            .and_then(|tree| mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, false, progress));
+            .and_then(|tree| {
+                mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, false, policy, progress)
+            });
         let Ok(meshed) = attempt else { continue };
         let quality = FinishQuality::of_mesh(&meshed.mesh);
         if best.as_ref().is_none_or(|b| quality.better_than(b)) {
@@ -589,11 +619,12 @@ fn merged_tree(
     surface: &LumenSurface,
     segment: usize,
     at: f64,
+    policy: &LayoutPolicy,
 ) -> Result<CenterlineTree> {
     let mut forced = vec![ForcedMerge { segment, at }];
     loop {
         let tree = CenterlineTree::build_merging(centerlines, &config.centerline, Some(surface), &forced)?;
-        let junctions = analyse_junctions(&tree, surface)?;
+        let junctions = analyse_junctions(&tree, surface, policy)?;
         let Some(overlap) = find_junction_overlap(&tree, &junctions, surface) else { return Ok(tree) };
         let next = tree.segments[overlap.branch];
         if forced.len() >= MAX_FORCED_MERGES || forced.iter().any(|f| f.segment == next) {
@@ -621,9 +652,10 @@ fn project_tree(
     config: &MeshConfig,
     normals_outward: bool,
     steep_short_branches: bool,
+    policy: &LayoutPolicy,
 ) -> Result<ProjectedTree> {
     let l = &config.lumen;
-    let mut junctions = analyse_junctions(tree, lumen_surface)?;
+    let mut junctions = analyse_junctions(tree, lumen_surface, policy)?;
     check_junction_spacing(tree, &junctions, lumen_surface)?;
     if !junctions.is_empty() && !l.core_elements.is_multiple_of(2) {
         return Err(Error::Config(format!(
@@ -633,13 +665,10 @@ fn project_tree(
             l.core_elements + 1
         )));
     }
-    // Every junction's pages get half the core's cells, so every branch keeps the square O-grid
-    // of the settings (thin pages, BRANCHING.md §4.3, are to give small side branches fewer).
-    equal_cells(&mut junctions, l.core_elements);
+    // Every fold splits the square O-grid of the settings along its middle row and column.
     keep_fold_cores_inside(&mut junctions, l.core_size, lumen_surface);
-    let templates: Vec<SectionTemplate> = branch_core_dims(tree, &junctions, l.core_elements, lumen_surface)?
-        .into_iter()
-        .map(|(nx, ny)| SectionTemplate::rect(nx, ny, l.core_size, l.ray_reach))
+    let templates: Vec<SectionTemplate> = (0..tree.branches.len())
+        .map(|_| SectionTemplate::rect(l.core_elements, l.core_elements, l.core_size, l.ray_reach))
         .collect();
     let sacs = name_sacs(tree, &config.centerline.sacs_mm);
     let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
@@ -680,6 +709,7 @@ pub fn mesh_tree(
     centerline_source: &Path,
     config: &MeshConfig,
     steep_short_branches: bool,
+    policy: &LayoutPolicy,
     progress: &mut Progress,
 ) -> Result<Meshed> {
     check_units(lumen_surface, &tree, centerline_source)?;
@@ -687,7 +717,7 @@ pub fn mesh_tree(
 
     progress.stage("projection");
     let ProjectedTree { junctions, templates, plans, projected } =
-        project_tree(&mut tree, lumen_surface, config, normals_outward, steep_short_branches)?;
+        project_tree(&mut tree, lumen_surface, config, normals_outward, steep_short_branches, policy)?;
 
     progress.stage("volume");
     let l = &config.lumen;
@@ -1106,7 +1136,8 @@ fn build_report(
                 centre: (g.centre.coords * scale).into(),
                 radius: g.radius * scale,
                 branches: g.slots.iter().map(|s| meshed.tree.branches[s.branch].name.clone()).collect(),
-                spine_axis: g.axis.into(),
+                arrangement: g.arrangement_name(),
+                spine_axis: g.spine_axis().map(Into::into),
                 wall_growth: match config.wall.growth {
                     WallGrowth::Ray => JunctionWall::Ray,
                     WallGrowth::Normal => meshed.junction_variant.wall,

@@ -483,13 +483,7 @@ pub fn clear_transition_length(
     // The folded end lies on the slot's two pages and the spine: where those meet the wall (the
     // crotches and the spine's ends) must lie ahead of the last ordinary section, or the
     // transition would run backwards there and fold over itself.
-    let (page_a, page_b) = geometry.side_pages(slot);
-    let fold_wall = [
-        geometry.centre + geometry.pages[page_a].dir * geometry.pages[page_a].depth,
-        geometry.centre + geometry.pages[page_b].dir * geometry.pages[page_b].depth,
-        geometry.centre + geometry.axis * geometry.spine_up,
-        geometry.centre - geometry.axis * geometry.spine_down,
-    ];
+    let fold_wall = geometry.fold_wall(slot);
     let fold_ahead = |d: f64| {
         let st = at(d);
         let towards = if at_start { -st.frame.tangent } else { st.frame.tangent };
@@ -727,7 +721,7 @@ fn cast_fold(
 
 /// Direction in which a transition arrives at the fold at the template point `xy`.
 fn fold_arrival(j: &JunctionEnd, template: &SectionTemplate, xy: &Vector2<f64>) -> Vector3<f64> {
-    j.geometry.arrival(j.fold.slot, &crate::junction::turn(j.fold.quarter_turns, xy), &j.fold.spine_cut(template))
+    j.geometry.arrival(j.fold.slot, &crate::junction::turn(j.fold.quarter_turns, xy), template.core_size)
 }
 
 /// A guide curve (Hermite end points and tangents) for each ring node.

@@ -59,9 +59,13 @@ pub struct JunctionReport {
     /// Centre and radius (output unit).
     pub centre: [f64; 3],
     pub radius: f64,
-    /// Branches counter-clockwise about the spine, the parent first among them.
+    /// Branches counter-clockwise about the spine (a book), or the parent first (sectors).
     pub branches: Vec<String>,
-    pub spine_axis: [f64; 3],
+    /// How the branches' folds meet: `book` (pages about a straight spine) or `sectors`
+    /// (around a non-planar junction; see docs/guide/junctions.md).
+    pub arrangement: &'static str,
+    /// The book's spine (null for sectors).
+    pub spine_axis: Option<[f64; 3]>,
     /// How the wall grew from the junction's lumen-surface nodes: `smoothed_normal`, `normal`
     /// or `ray` (the best of them, see docs/guide/junctions.md).
     pub wall_growth: crate::volume::JunctionWall,
