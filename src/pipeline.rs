@@ -382,15 +382,26 @@ pub fn mesh_vessel(
     progress.stage("surface index");
     let lumen_surface = LumenSurface::new(surface)?;
     check_centerline_file(&lumen_surface, centerlines)?;
-    // Books first (a straight spine shared by every branch is the best-shaped fold where it
-    // orders the branches); only where one was refused for that, the vessel again with sectors
-    // at the junctions no book orders.
+    // Books first: a straight spine shared by every branch is the best-shaped fold where it
+    // orders the branches. A vessel refused so, or short of a bar, with a junction of four or
+    // more branches is meshed again with that junction in sectors, and the better mesh kept
+    // (the first of equals; judged as a junction's finishes are).
     let books = LayoutPolicy::books_only();
     let meshed = mesh_vessel_laid_out(surface, &lumen_surface, centerlines, config, &books, progress);
-    if meshed.is_ok() || !books.book_refused.get() {
+    let within_bars = |m: &Meshed| FinishQuality::of_mesh(&m.mesh).meets_bars();
+    if meshed.as_ref().is_ok_and(within_bars) || !books.sectors_differ.get() {
         return meshed;
     }
-    mesh_vessel_laid_out(surface, &lumen_surface, centerlines, config, &LayoutPolicy::with_sectors(), progress)
+    let sectors = LayoutPolicy::with_sectors();
+    let laid_out = mesh_vessel_laid_out(surface, &lumen_surface, centerlines, config, &sectors, progress);
+    match (meshed, laid_out) {
+        (Ok(a), Ok(b)) => {
+            Ok(if FinishQuality::of_mesh(&b.mesh).better_than(&FinishQuality::of_mesh(&a.mesh)) { b } else { a })
+        }
+        (Ok(a), Err(_)) => Ok(a),
+        (Err(_), Ok(b)) => Ok(b),
+        (Err(_), Err(e)) => Err(e),
+    }
 }
 
 /// [`mesh_vessel`] with the junctions' arrangements `policy` allows.

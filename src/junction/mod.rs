@@ -50,11 +50,12 @@ const AXIS_CLEARANCE_DEG: f64 = 25.0;
 /// Which arrangements the analysis may use (see [`analyse_junctions`]).
 #[derive(Debug, Default)]
 pub struct LayoutPolicy {
-    /// Sectors where no book orders the branches; otherwise such a junction is refused.
+    /// Sectors at every junction of four or more branches that has a sector layout; otherwise
+    /// books only, and a junction no book orders is refused.
     pub sectors: bool,
-    /// Set when a junction was refused because no book orders its branches (with `sectors`
-    /// off): meshing again with sectors may succeed.
-    pub book_refused: std::cell::Cell<bool>,
+    /// Set, with `sectors` off, when a junction of four or more branches has a sector layout:
+    /// meshing again with sectors gives another mesh.
+    pub sectors_differ: std::cell::Cell<bool>,
 }
 
 impl LayoutPolicy {
@@ -489,15 +490,6 @@ fn analyse_junction(
     let mut members: Vec<(usize, bool)> = vec![(junction.parent, true)];
     members.extend(junction.daughters.iter().map(|&d| (d, false)));
     let where_ = || format!("the junction at {}", describe_point(&x));
-    if members.len() > MAX_BOOK_BRANCHES && !policy.sectors {
-        policy.book_refused.set(true);
-        return Err(Error::Geometry(format!(
-            "{}: {} has {} branches; at most {MAX_BOOK_BRANCHES} can share one book of pages",
-            surface.source.display(),
-            where_(),
-            members.len()
-        )));
-    }
     let dirs: Vec<(Vector3<f64>, f64)> = members
         .iter()
         .map(|&(b, parent)| {
@@ -509,12 +501,24 @@ fn analyse_junction(
     let directions: Vec<Vector3<f64>> = dirs.iter().map(|(d, _)| *d).collect();
     let radii: Vec<f64> = dirs.iter().map(|(_, r)| *r).collect();
     let (mut axis, gap, _) = spine_axis(&directions);
-    // A book whose branches cannot be ordered about its spine folds them onto narrow pages:
-    // four or more branches are then laid out in sectors where they fold better (three admit
-    // no other arrangement than the book).
-    let ordered = gap.to_degrees() >= MIN_ANGULAR_GAP_DEG && members.len() <= MAX_BOOK_BRANCHES;
-    if !ordered && !policy.sectors {
-        policy.book_refused.set(true);
+    // Four or more branches may be laid out in sectors (three admit no other arrangement than
+    // the book).
+    let sectors = if members.len() >= 4 { layout::sector_layout(&directions, &radii) } else { None };
+    if sectors.is_some() && !policy.sectors {
+        policy.sectors_differ.set(true);
+    }
+    if let Some(sectors) = sectors.filter(|_| policy.sectors) {
+        return sectors_geometry(index, x, r_x, &members, &directions, &radii, &sectors, surface, &where_);
+    }
+    if members.len() > MAX_BOOK_BRANCHES {
+        return Err(Error::Geometry(format!(
+            "{}: {} has {} branches; at most {MAX_BOOK_BRANCHES} can share one book of pages",
+            surface.source.display(),
+            where_(),
+            members.len()
+        )));
+    }
+    if gap.to_degrees() < MIN_ANGULAR_GAP_DEG {
         return Err(Error::Geometry(format!(
             "{}: {}: the branches cannot be ordered around a common axis (the best axis leaves only {:.1} degrees \
              between two branches, at least {MIN_ANGULAR_GAP_DEG} are needed): the junction is strongly non-planar",
@@ -522,12 +526,6 @@ fn analyse_junction(
             where_(),
             gap.to_degrees()
         )));
-    }
-    if !ordered {
-        let book = book_layout_score(&directions, &radii, &axis);
-        if let Some(sectors) = layout::sector_layout(&directions, &radii).filter(|l| l.score > book) {
-            return sectors_geometry(index, x, r_x, &members, &directions, &radii, &sectors, surface, &where_);
-        }
     }
     // A deterministic sign: the largest component positive.
     let imax = axis.iamax();
@@ -602,49 +600,6 @@ fn book_geometry(
         folds,
         core_scale: 1.0,
     })
-}
-
-/// The worst fold of a book about `axis` as [`layout::score`] measures it, for the choice
-/// between a book whose branches cannot be ordered about its spine and sectors.
-fn book_layout_score(dirs: &[Vector3<f64>], radii: &[f64], axis: &Vector3<f64>) -> f64 {
-    let k = dirs.len();
-    let reference = (dirs[0] - axis * dirs[0].dot(axis)).normalize();
-    let angle = |d: &Vector3<f64>| {
-        let p = d - axis * d.dot(axis);
-        if p.norm() < 1e-9 {
-            return None;
-        }
-        Some(signed_angle(&reference, &p.normalize(), axis).rem_euclid(TAU))
-    };
-    let Some(mut order): Option<Vec<(f64, usize)>> = dirs.iter().enumerate().map(|(i, d)| angle(d).map(|a| (a, i))).collect()
-    else {
-        return 0.0;
-    };
-    order.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut spokes = vec![*axis, -axis];
-    for i in 0..k {
-        let ((a, ia), (b, ib)) = (order[i], order[(i + 1) % k]);
-        let width = (b - a).rem_euclid(TAU);
-        let width = if width == 0.0 { TAU } else { width };
-        spokes.push(direction_about(axis, &reference, a + width * radii[ia] / (radii[ia] + radii[ib])));
-    }
-    let mut corners = vec![[0; 4]; k];
-    for (pos, &(_, i)) in order.iter().enumerate() {
-        // Counter-clockwise about the branch's direction: its ccw page, the top, its cw page, the bottom.
-        corners[i] = [2 + pos, 0, 2 + (pos + k - 1) % k, 1];
-        let ccw_about_dir = spokes[corners[i][0]].cross(&spokes[0]).dot(&dirs[i]) >= 0.0;
-        if !ccw_about_dir {
-            corners[i] = [2 + (pos + k - 1) % k, 0, 2 + pos, 1];
-        }
-    }
-    let l = layout::Layout {
-        valence: vec![0; spokes.len()],
-        sector_neighbours: vec![[0; 4]; k],
-        spokes,
-        corners,
-        score: 0.0,
-    };
-    layout::score(&l, dirs)
 }
 
 /// A junction laid out in sectors: each slot's fold takes its layout corners, ordered so that
