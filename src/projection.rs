@@ -171,6 +171,112 @@ fn cast_section(
     cast_rays(template, surface, station, core, &targets, orientation)
 }
 
+/// Rays cast from a section's centre over its plane to find its wall (per template target
+/// direction), and the candidates searched for a centre inside the lumen.
+const RECENTRE_RINGS: usize = 4;
+const RECENTRE_SPOKES: usize = 12;
+
+/// Whether a point lies inside the lumen: the first wall met along a few directions is seen
+/// from inside (a consistently wound surface's first hit from inside faces away).
+fn inside_lumen(surface: &LumenSurface, p: &Point3<f64>, orientation: f64, reach: f64) -> bool {
+    [Vector3::x(), Vector3::y(), Vector3::z(), -Vector3::x()].iter().all(|d| {
+        surface
+            .first_hit(p, d, reach)
+            .is_some_and(|h| surface.normals[h.triangle as usize].dot(d) * orientation > 0.0)
+    })
+}
+
+/// A section cast from the lumen itself rather than from the centerline's point: where the
+/// ordinary section's rays do not all meet the wall from inside (a tight or eccentric stenosis,
+/// a kink, a lumen whose smoothed centerline runs near one side), the section's centre moves,
+/// within its plane, to the point of it furthest inside the lumen near the centerline, the rays
+/// from there find the section's wall (a closed loop around an inside point: every ray meets
+/// it from inside), and the core shrinks until its boundary lies within [`CORE_REACH`] of that
+/// wall. The plane and the frame are the station's, so the section stays one of the branch's.
+fn recentred_section(
+    template: &SectionTemplate,
+    surface: &LumenSurface,
+    station: &CenterlineSample,
+    orientation: f64,
+) -> (Probe, ProjectedSection) {
+    let f = &station.frame;
+    let r = station.radius;
+    let reach = RAY_SLACK * template.ray_reach * r * 2.0;
+    let depth = |p: &Point3<f64>| -> Option<f64> {
+        inside_lumen(surface, p, orientation, reach).then(|| surface.closest(p).distance)
+    };
+    // The deepest of a polar grid of candidates within the section's radius.
+    let mut best: Option<(f64, Point3<f64>)> = depth(&station.point).map(|d| (d, station.point));
+    for ring in 1..=RECENTRE_RINGS {
+        for k in 0..RECENTRE_SPOKES {
+            let phi = std::f64::consts::TAU * k as f64 / RECENTRE_SPOKES as f64;
+            let rho = r * ring as f64 / RECENTRE_RINGS as f64;
+            let p = station.point + (f.normal * phi.cos() + f.binormal * phi.sin()) * rho;
+            if let Some(d) = depth(&p) {
+                if best.is_none_or(|(b, _)| d > b) {
+                    best = Some((d, p));
+                }
+            }
+        }
+    }
+    let Some((_, centre)) = best else {
+        return cast_section(template, surface, station, orientation);
+    };
+    let moved = CenterlineSample { point: centre, ..*station };
+    // The wall along each ray direction, from the centre.
+    let wall: Vec<Option<f64>> = template
+        .target_dir
+        .iter()
+        .map(|d| {
+            let dir = f.normal * d.x + f.binormal * d.y;
+            surface.first_hit(&centre, &dir, reach).map(|h| h.distance)
+        })
+        .collect();
+    if wall.iter().any(Option::is_none) {
+        return cast_section(template, surface, &moved, orientation);
+    }
+    // The core shrunk about the centre until each ring node lies within CORE_REACH of the way
+    // to the wall in its direction.
+    let mut shrink: f64 = 1.0;
+    for (k, w) in wall.iter().enumerate() {
+        let c = template.core[template.ring_core_index[k]];
+        let along = c.norm() * r;
+        if along > 0.0 {
+            let dir = template.target_dir[k];
+            let cos = (c.dot(&dir) / c.norm()).max(0.1);
+            shrink = shrink.min(CORE_REACH * w.expect("checked") * cos / along);
+        }
+    }
+    let core: Vec<Point3<f64>> = template.core.iter().map(|c| template.place(&moved, &(c * shrink))).collect();
+    let targets: Vec<Point3<f64>> = template
+        .target_dir
+        .iter()
+        .zip(&wall)
+        .map(|(d, w)| centre + (f.normal * d.x + f.binormal * d.y) * (w.expect("checked") / RAY_SLACK * 0.999))
+        .collect();
+    cast_rays(template, surface, &moved, core, &targets, orientation)
+}
+
+/// An ordinary section: cast from the centerline, or recentred in the lumen where that does not
+/// close (see [`recentred_section`]).
+fn ordinary_section(
+    template: &SectionTemplate,
+    surface: &LumenSurface,
+    station: &CenterlineSample,
+    orientation: f64,
+) -> (Probe, ProjectedSection) {
+    let cast = cast_section(template, surface, station, orientation);
+    if cast.0.valid() {
+        return cast;
+    }
+    let recentred = recentred_section(template, surface, station, orientation);
+    if recentred.0.valid() {
+        recentred
+    } else {
+        cast
+    }
+}
+
 /// Everything `project_branch` needs besides the branch.
 pub struct ProjectionSetup<'a> {
     pub template: &'a SectionTemplate,
@@ -306,8 +412,13 @@ pub fn project_branch(
         Some(_) => hi,
         None => samples[i1].s - r1 * (trim_outlet + if dome_end { CLOSED_END_MARGIN } else { 0.0 }),
     };
+    // Between the ends, a section that does not close from the centerline may from inside the
+    // lumen (see `recentred_section`).
     if let Some((bad, p)) = probes.iter().find(|(i, p)| {
-        samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !p.valid()
+        samples[*i].s >= samples[i0].s.min(s_start)
+            && samples[*i].s <= samples[i1].s.max(s_end)
+            && !p.valid()
+            && !recentred_section(template, surface, &samples[*i], orient).0.valid()
     }) {
         return Err(Error::Geometry(format!(
             "{}: the cross-section of branch {name} {} does not close: {} of {} rays miss the lumen surface and {} \
@@ -347,7 +458,7 @@ pub fn project_branch(
     let positions =
         if stub { vec![s_start] } else { crate::blocks::station_positions(s_start, s_end, |s| spacing(&branch.at(s))) };
     let sections: Vec<(Probe, ProjectedSection)> =
-        positions.par_iter().map(|&s| cast_section(template, surface, &branch.at(s), orient)).collect();
+        positions.par_iter().map(|&s| ordinary_section(template, surface, &branch.at(s), orient)).collect();
     let mut ordinary = Vec::with_capacity(sections.len());
     for (probe, section) in sections {
         if !probe.valid() {

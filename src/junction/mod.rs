@@ -320,7 +320,13 @@ pub fn signed_angle(from: &Vector3<f64>, to: &Vector3<f64>, axis: &Vector3<f64>)
     from.cross(to).dot(axis).atan2(from.dot(to))
 }
 
-/// Distance from a point along a direction to the lumen wall, or an error naming the junction.
+/// A spoke that runs out of the vessel through an open end (between two branches leaving a few
+/// degrees apart, the ray finds no crotch before an end) reaches this many junction radii.
+const OPEN_SPOKE_REACH: f64 = 3.0;
+
+/// Distance from a point along a direction to the lumen wall; where the ray leaves through an
+/// open end from a centre inside the lumen, [`OPEN_SPOKE_REACH`] junction radii (`reach` is 20
+/// of them); an error naming the junction when the centre lies outside.
 fn wall_distance(
     surface: &LumenSurface,
     from: &Point3<f64>,
@@ -328,7 +334,11 @@ fn wall_distance(
     reach: f64,
     what: &dyn Fn() -> String,
 ) -> Result<f64> {
-    surface.first_hit(from, dir, reach).map(|h| h.distance).ok_or_else(|| {
+    let hit = surface.first_hit(from, dir, reach).map(|h| h.distance);
+    if hit.is_none() && surface.winding_number(from).abs() >= 0.5 {
+        return Ok(OPEN_SPOKE_REACH * reach / 20.0);
+    }
+    hit.ok_or_else(|| {
         Error::Geometry(format!(
             "{}: {}: a ray from the junction centre along ({:.3}, {:.3}, {:.3}) does not meet the lumen wall \
              within {:.2} mm; the junction centre may lie outside the lumen (check the centerlines)",
@@ -518,7 +528,9 @@ fn analyse_junction(
             members.len()
         )));
     }
-    if gap.to_degrees() < MIN_ANGULAR_GAP_DEG {
+    // With sectors allowed, a bifurcation's book is meshed however narrow its pages (there is no
+    // other arrangement of three branches), and the elements decide.
+    if gap.to_degrees() < MIN_ANGULAR_GAP_DEG && !(policy.sectors && members.len() == 3) {
         return Err(Error::Geometry(format!(
             "{}: {}: the branches cannot be ordered around a common axis (the best axis leaves only {:.1} degrees \
              between two branches, at least {MIN_ANGULAR_GAP_DEG} are needed): the junction is strongly non-planar",
