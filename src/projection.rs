@@ -97,6 +97,8 @@ pub struct JunctionEnd<'a> {
 #[derive(Debug, Clone, Default)]
 struct Probe {
     misses: usize,
+    /// The rays that met no wall.
+    missed: Vec<usize>,
     /// Hits on a triangle seen from outside the lumen.
     from_outside: usize,
     /// Largest |normal . tangent| over the hit triangles.
@@ -149,6 +151,7 @@ fn cast_rays(
             }
             None => {
                 probe.misses += 1;
+                probe.missed.push(k);
                 section.surface.push(origin + dir * len);
             }
         }
@@ -823,11 +826,42 @@ fn cast_fold(
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     let fold_points = points.pop().expect("at least two transition sections");
     let at_fold = transition_sample(j, station, sense, 1.0, j.geometry.centre);
-    let (probe, fold) = cast_rays(template, setup.surface, &at_fold, fold_points.core, &fold_points.targets, orient);
+    let (mut probe, mut fold) =
+        cast_rays(template, setup.surface, &at_fold, fold_points.core, &fold_points.targets, orient);
+    land_missed_fold_rays(&mut probe, &mut fold, setup.surface);
     if !probe.valid() {
         return Err(transition_failure(setup, branch, j.geometry, 1.0, &probe));
     }
     Ok(FoldCast { params, points, fold: ProjectedSection { in_junction: true, ..fold } })
+}
+
+/// A folded section's ray that meets no wall within its reach (its sector runs out down a
+/// branch leaving a few degrees from its neighbour) lands on the wall point nearest its ray at
+/// the mean distance its two neighbours in the ring met the wall.
+fn land_missed_fold_rays(probe: &mut Probe, fold: &mut ProjectedSection, surface: &LumenSurface) {
+    if probe.misses == 0 || probe.from_outside > 0 {
+        return;
+    }
+    let m = fold.surface.len();
+    let missed = std::mem::take(&mut probe.missed);
+    let hit = |k: usize| !missed.contains(&k);
+    for &k in &missed {
+        let (a, b) = ((k + m - 1) % m, (k + 1) % m);
+        if !(hit(a) && hit(b)) {
+            probe.missed.push(k);
+            continue;
+        }
+        let reach = 0.5 * ((fold.surface[a] - fold.origins[a]).norm() + (fold.surface[b] - fold.origins[b]).norm());
+        let landed = surface.closest(&(fold.origins[k] + fold.dirs[k] * reach)).point;
+        let d = landed - fold.origins[k];
+        if d.norm() > 0.0 {
+            fold.surface[k] = landed;
+            fold.dirs[k] = d.normalize();
+            probe.misses -= 1;
+        } else {
+            probe.missed.push(k);
+        }
+    }
 }
 
 /// Direction in which a transition arrives at the fold at the template point `xy`.
@@ -853,7 +887,7 @@ fn guided_section(
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     keep_core_off_the_wall(&mut p, guide_at, setup.template, setup.surface);
     let targets = guided_targets(&p, guide_at, setup.template, j.geometry.radius);
-    let (probe, section) = cast_rays(
+    let (mut probe, mut section) = cast_rays(
         setup.template,
         setup.surface,
         &CenterlineSample { point: p.centre, ..sample },
@@ -861,7 +895,36 @@ fn guided_section(
         &targets,
         orient,
     );
+    land_missed_rays_near_guides(&mut probe, &mut section, guide_at, setup);
     (probe, ProjectedSection { in_junction: true, ..section })
+}
+
+/// A transition's ray that meets no wall (aimed through its guide point, it runs out down a
+/// neighbour's lumen where the junction's surface turns sharply) lands on the wall point nearest
+/// its guide point, which lies between its wall nodes on the ordinary and on the folded section:
+/// the node then keeps its place between them, and the elements around it are judged (and
+/// optimised) as any.
+fn land_missed_rays_near_guides(
+    probe: &mut Probe,
+    section: &mut ProjectedSection,
+    guide_at: &[Point3<f64>],
+    setup: &ProjectionSetup,
+) {
+    if probe.misses == 0 || probe.from_outside > 0 {
+        return;
+    }
+    for k in std::mem::take(&mut probe.missed) {
+        let origin = section.origins[k];
+        let landed = setup.surface.closest(&guide_at[k]).point;
+        let d = landed - origin;
+        if d.norm() > 0.0 {
+            section.surface[k] = landed;
+            section.dirs[k] = d.normalize();
+            probe.misses -= 1;
+        } else {
+            probe.missed.push(k);
+        }
+    }
 }
 
 /// The sections strictly between `station` and the fold, each ray aimed at `guide(k, u)`.
