@@ -387,9 +387,7 @@ pub fn mesh_vessel(
     // more branches is meshed again with that junction in sectors, and the better mesh kept
     // (the first of equals; judged as a junction's finishes are).
     let books = LayoutPolicy::books_only();
-    let t0 = std::time::Instant::now();
     let meshed = mesh_vessel_laid_out(surface, &lumen_surface, centerlines, config, &books, progress);
-    if std::env::var("VH_DEBUG").is_ok() { eprintln!("DBG pass1 {:.2}s ok={} differ={}", t0.elapsed().as_secs_f64(), meshed.is_ok(), books.sectors_differ.get()); }
     let within_bars = |m: &Meshed| FinishQuality::of_mesh(&m.mesh).meets_bars();
     if meshed.as_ref().is_ok_and(within_bars) || !books.sectors_differ.get() {
         return meshed;
@@ -725,8 +723,6 @@ pub fn mesh_tree(
     policy: &LayoutPolicy,
     progress: &mut Progress,
 ) -> Result<Meshed> {
-    let dbg_t = std::time::Instant::now();
-    let _dbg = DbgTimer(dbg_t, policy.sectors);
     check_units(lumen_surface, &tree, centerline_source)?;
     let normals_outward = check_inside(lumen_surface, &tree, centerline_source)?;
 
@@ -1538,9 +1534,3 @@ mod tests {
     }
 }
 
-struct DbgTimer(std::time::Instant, bool);
-impl Drop for DbgTimer {
-    fn drop(&mut self) {
-        if std::env::var("VH_DEBUG").is_ok() { eprintln!("DBG mesh_tree sectors={} {:.2}s", self.1, self.0.elapsed().as_secs_f64()); }
-    }
-}
