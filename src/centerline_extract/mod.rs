@@ -7,22 +7,19 @@
 //! VMTK's centerlines are paths of minimal cost `1/R` through the Voronoi diagram of the surface
 //! points, whose vertices are centres of maximal empty balls (the medial axis) with `R` their
 //! radius. We keep that principle, which centres the line by construction and gives the radius
-//! for free, but replace the two fragile parts:
+//! for free:
 //!
-//! * **Medial balls without a 3D Delaunay tessellation.** Every surface vertex gets its maximal
-//!   empty ball by the *shrinking-ball* algorithm (Ma, Bae, Bhatt & Lee, "3D medial axis point
-//!   approximation using nearest neighbors and the normal field", Vis. Comput. 2012): a ball
-//!   tangent at the vertex on its inner side is shrunk until no other vertex lies inside. Its
-//!   centre is the vertex's Voronoi pole, the same point VMTK's poles approximate, found with
-//!   a few k-d tree queries per vertex: no robust-predicate Delaunay code, no qhull/TetGen (C,
-//!   C++, AGPL), no slivers, parallel and deterministic.
-//! * **A graph of overlapping balls instead of Voronoi faces.** Balls closer than a tenth of
-//!   their radius are merged; two balls are linked when their centres are closer than half the
-//!   smaller radius, so every link lies in the union of two empty balls, i.e. inside the lumen,
-//!   and is short enough not to cut corners. Dijkstra with VMTK's cost `length x mean(1/R)` from the inlet gives all the paths at
-//!   once, sharing the inlet part exactly as VMTK's do.
+//! * **Medial balls from the inner Voronoi diagram** (`sampling`, `voronoi`): the surface, closed
+//!   by a fan on every boundary loop, is resampled at a spacing set by the local radius, so that
+//!   thin vessels and coarse triangles alike get enough points; their 3D Delaunay tessellation
+//!   (Qhull's C library, vendored and compiled with the `cc` crate, see `qhull`) gives a ball per
+//!   tetrahedron, its circumsphere, kept when its centre passes VMTK's test of an internal
+//!   tetrahedron (inside the tangent planes at the four corners). Tetrahedra sharing a face give
+//!   a link when their balls overlap, so every link lies in the union of two empty balls, i.e.
+//!   inside the lumen. Dijkstra with VMTK's cost `length x mean(1/R)` from the inlet gives all
+//!   the paths at once, sharing the inlet part exactly as VMTK's do.
 //!
-//! The path through ball centres zig-zags at the scale of the merge distance, so it is
+//! The path through ball centres zig-zags at the scale of the sample spacing, so it is
 //! resampled at a tenth of the radius and smoothed with a Gaussian in arc length of width
 //! 0.25 r (corner cutting in a bend of radius `Rb` is about `(0.25 r)^2 / 2Rb`, well below
 //! 1 % of r on every vessel we have). Where the depth is nearly flat across a section, the path
@@ -54,6 +51,7 @@
 mod centring;
 mod ends;
 mod medial;
+mod qhull;
 mod rounded;
 mod sampling;
 mod split;
