@@ -324,10 +324,9 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
     };
     if !args.quiet {
         eprintln!(
-            "vesselhex: {ends}{} lumen + {} wall hexes; scaled Jacobian min {:.3} (wall mean {:.3}); lumen skew mean \
-             {:.3}; surface nodes within {:.2e} um; written to {}",
-            report.lumen.elements,
-            report.wall.all.elements,
+            "vesselhex: {ends}{}; scaled Jacobian min {:.3} (wall mean {:.3}); lumen skew mean {:.3}; surface nodes \
+             within {:.2e} um; written to {}",
+            hex_counts(&report),
             report.lumen.scaled_jacobian.min.min(report.wall.all.scaled_jacobian.min),
             report.wall.all.scaled_jacobian.mean,
             report.lumen.equiangle_skew.mean,
@@ -336,6 +335,18 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
         );
     }
     Ok(if ends.is_empty() { MeshOutcome::Complete } else { MeshOutcome::EndsNotMeshed })
+}
+
+/// The hexes of the summary line by part, adding up to the mesh's: lumen, wall, and the flow
+/// extensions' when there are any.
+fn hex_counts(report: &vesselhex::report::Report) -> String {
+    let extension: usize = report.additions.extensions.iter().flatten().map(|e| e.elements).sum();
+    let (lumen, wall) = (report.lumen.elements, report.wall.all.elements);
+    if extension == 0 {
+        format!("{lumen} lumen + {wall} wall hexes")
+    } else {
+        format!("{lumen} lumen + {wall} wall + {extension} extension hexes")
+    }
 }
 
 /// Exit codes (docs/guide/command-line.md): 0 success, 1 error, 2 usage error (clap's), 3 written but some
