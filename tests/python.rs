@@ -76,6 +76,8 @@ m = vesselhex.mesh("fixtures/y_bifurcation.stl", preset="coarse")
 assert m.hexes.ndim == 2 and m.hexes.shape[1] == 8 and m.hexes.shape[0] > 0, m.hexes.shape
 assert m.report["elements"] == m.hexes.shape[0], (m.report["elements"], m.hexes.shape)
 assert m.report["input"]["centerlines"] == "(computed from the surface)", m.report["input"]
+from importlib.metadata import files
+assert any(f.name == "COPYING-qhull.txt" for f in files("vesselhex")), "Qhull's licence is not installed with its code"
 print(m.hexes.shape[0], "hexes")
 "#;
 
