@@ -152,6 +152,11 @@ fn a_broken_row_fails_alone_and_a_rerun_meshes_only_what_changed() {
             assert_eq!(before[column], after[column], "{}: {column}", before["case"]);
         }
     }
+    // A case's folder meshed again by hand with other settings is not done any more.
+    mesh_surface_cli(&y, &out.join("y"), &["--formats", "vtu,abaqus"]);
+    batch(&manifest, &out, &["--jobs", "2", "--quiet"]);
+    assert_eq!(statuses(&out), ["failed", "skipped", "meshed"]);
+    assert!(!out.join("y/abaqus").exists());
     // A setting changed on one row meshes that case again, and only it.
     let manifest = write_manifest("vtu;calculix");
     batch(&manifest, &out, &["--jobs", "2", "--quiet"]);

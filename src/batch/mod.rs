@@ -140,7 +140,7 @@ impl Batch {
                 let before = previous.iter().find(|r| r.case == case.name);
                 let done = match before {
                     Some(row) if !settings.force && row.has_mesh() && fingerprint.is_some() => {
-                        (row.fingerprint == fingerprint).then(|| done_row(&case, row, output)).flatten()
+                        (row.fingerprint == fingerprint).then(|| done_row(&case, &settings, row, output)).flatten()
                     }
                     _ => None,
                 };
@@ -235,11 +235,16 @@ impl Batch {
 }
 
 /// The row of a case done before: built again from its `report.json`, with the seconds and
-/// memory of the run that made it; `None` when the report is missing or unreadable.
-fn done_row(case: &Case, before: &Row, output: &Path) -> Option<Row> {
+/// memory of the run that made it; `None` when the report is missing, unreadable, or made with
+/// another configuration than the case's now (the folder meshed again by hand since).
+fn done_row(case: &Case, settings: &Settings, before: &Row, output: &Path) -> Option<Row> {
     let path = output.join(&case.name).join(crate::output::MARKER);
     let bytes = crate::input::read_regular_file(&path, 64 << 20, "cannot read the report").ok()?;
     let report: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
+    let config = serde_json::to_value(case::effective_config(case, settings).ok()?).ok()?;
+    if report.get("config") != Some(&config) {
+        return None;
+    }
     Some(Row {
         seconds: before.seconds,
         peak_memory_mib: before.peak_memory_mib,
