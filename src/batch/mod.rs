@@ -161,13 +161,14 @@ impl Batch {
     }
 
     /// The rows of every case in the manifest's order: those done before, and `ran` (the rows of
-    /// the cases meshed now, any order); writes them as the summary.
+    /// the cases meshed now, any order; a case without one is a failed row saying so); writes
+    /// them as the summary.
     pub fn finish(&self, ran: Vec<Row>) -> Result<Vec<Row>> {
-        let rows: Vec<Row> = self
-            .planned
-            .iter()
-            .filter_map(|p| p.done.clone().or_else(|| ran.iter().find(|r| r.case == p.case.name).cloned()))
-            .collect();
+        let row_of = |p: &Planned| {
+            let ran = ran.iter().find(|r| r.case == p.case.name).cloned();
+            p.done.clone().or(ran).unwrap_or_else(|| Row::failed(&p.case.name, EXIT_ERROR, "no result came back"))
+        };
+        let rows: Vec<Row> = self.planned.iter().map(row_of).collect();
         summary::write_summary(&rows, &self.output)?;
         Ok(rows)
     }
@@ -277,6 +278,20 @@ mod tests {
     use super::*;
 
     const GIB: u64 = 1 << 30;
+
+    #[test]
+    fn a_case_without_a_row_is_a_failed_row_and_the_folder_is_one_batchs() {
+        let dir = tempfile::tempdir().unwrap();
+        let case = Case { name: "a".into(), surface: dir.path().join("missing.stl"), ..Default::default() };
+        let batch = Batch::open(vec![case], Settings::default(), dir.path()).unwrap();
+        assert_eq!(batch.pending().count(), 1);
+        assert_eq!(batch.planned[0].fingerprint, None, "an input that cannot be read has no fingerprint");
+        let rows = batch.finish(vec![]).unwrap();
+        assert_eq!((rows[0].status, rows[0].cause.as_str()), (Status::Failed, "no result came back"));
+        assert_eq!(summary::read_summary(dir.path()), rows);
+        let again = Batch::open(vec![], Settings::default(), dir.path()).err().expect("refused");
+        assert!(again.to_string().contains("another vesselhex batch is writing into this folder"), "{again}");
+    }
 
     #[test]
     fn jobs_start_only_as_many_as_fit_in_the_memory_available() {
