@@ -34,6 +34,13 @@ enum Command {
         #[arg(long)]
         output: PathBuf,
     },
+    /// Mesh every case of a manifest (CSV or JSON), N at a time, each in a process of its own,
+    /// with a summary table (summary.csv, summary.json).
+    #[command(long_about = vesselhex::batch::command::BATCH_HELP)]
+    Batch(vesselhex::batch::command::BatchArgs),
+    /// One case of `vesselhex batch`, handed over on standard input (run by the batch itself).
+    #[command(hide = true)]
+    BatchCase,
 }
 
 const MESH_HELP: &str = "Mesh a vessel: lumen (core + four lateral blocks per cross-section, rays cast from the core \
@@ -367,6 +374,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Mesh(args) => mesh(args),
         Command::Centerlines(args) => centerlines(args).map(|_| MeshOutcome::Complete),
+        Command::Batch(args) => return vesselhex::batch::command::run_command(args),
+        Command::BatchCase => return vesselhex::batch::command::run_child(),
         Command::Fixtures { output } => vesselhex::synthetic::write_all_fixtures(&output)
             .and_then(|_| vesselhex::synthetic_branching::write_all_branching_fixtures(&output))
             .map(|_| MeshOutcome::Complete),

@@ -24,7 +24,7 @@ fn python_package_tests_pass() {
         _ => {
             let why = format!(
                 "{python} cannot import vesselhex and pytest (build and install the wheel: docs/python.md; \
-                 pip install pytest meshio matplotlib pyvista; or set VESSELHEX_PYTHON)"
+                 pip install pytest meshio matplotlib pyvista \"dask[distributed]\" pandas; or set VESSELHEX_PYTHON)"
             );
             assert!(!under_ci(), "CI=true but {why}");
             eprintln!("skipped: {why}");

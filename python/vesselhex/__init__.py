@@ -13,6 +13,9 @@ arrays::
     m.write("out/aaa", formats=["vtu", "calculix"])
     grid = m.to_pyvista()                 # or m.to_meshio()
 
+A cohort is one call, here or on a Dask cluster: :func:`mesh_many` meshes the cases of a
+manifest, each in a process of its own, and returns the results table (a pandas DataFrame).
+
 The surface may be a file (STL, VTP, legacy VTK), ``(points, triangles)`` arrays, or a PyVista,
 meshio or VTK polydata object, so a VMTK or PyVista pipeline passes it straight in. Errors are
 :class:`VesselhexError` subclasses carrying the command line's one-line message. The GIL is
@@ -30,10 +33,12 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from . import _native
+from ._batch import mesh_many
 from ._native import ConfigError, FileError, GeometryError, InputError, VesselhexError
 
 __all__ = [
     "mesh",
+    "mesh_many",
     "centerlines",
     "formats",
     "Mesh",
