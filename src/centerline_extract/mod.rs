@@ -61,8 +61,8 @@ mod split;
 mod voronoi;
 mod vtp;
 
-use ends::Cap;
-pub use ends::{EndKind, Hole, InletChoice, VesselEnd, CAP_SPAN, END_SPAN};
+
+pub use ends::{find_caps, Cap, EndKind, Hole, InletChoice, VesselEnd, CAP_SPAN, END_SPAN};
 pub use split::branch_split;
 pub use vtp::{write_branch_split, write_vtp};
 

@@ -120,7 +120,7 @@ fn diagonal(vertices: &[Point3<f64>]) -> f64 {
 
 /// Welds vertices within [`WELD`] of the diagonal (the first of a group is kept, in index
 /// order) and drops the vertices no triangle uses; returns how many were merged.
-fn weld(surface: &mut TriangleSurface) -> usize {
+pub fn weld(surface: &mut TriangleSurface) -> usize {
     let tol = WELD * diagonal(&surface.vertices);
     if tol <= 0.0 {
         return 0;

@@ -17,7 +17,7 @@ use crate::resources::short;
 pub use crate::resources::ReadLimits;
 use crate::units::LengthUnit;
 pub use arrays::{centerlines_from_arrays, surface_from_arrays, PolylineArrays};
-pub use hygiene::{clean_surface, HygieneReport};
+pub use hygiene::{clean_surface, weld, HygieneReport};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use polydata::PolyData;
