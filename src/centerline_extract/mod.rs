@@ -195,9 +195,7 @@ impl EndSearch {
     fn new(surface: &TriangleSurface, notes: &mut Vec<String>) -> Result<EndSearch> {
         let (source, vertices) = (&surface.source, &surface.vertices);
         // Wound consistently for the closing below. Callers pass a surface `clean_surface` has
-        // already wound (and reported); what is left to flip is a non-orientable scrap, which
-        // each pass winds differently (4 triangles of openlb_cerebral_aneurysm_tree), so it is
-        // not reported again.
+        // already wound (and reported): nothing is left to flip.
         let mut triangles = surface.triangles.clone();
         topology::orient_consistently(&mut triangles);
         // The surface closed by a fan on every boundary loop (ends and holes alike) and facing

@@ -5,6 +5,7 @@ mod arrays;
 mod centerline;
 mod csv;
 mod hygiene;
+mod orientation;
 mod polydata;
 mod stl;
 mod surface;
