@@ -172,7 +172,8 @@ struct CenterlinesArgs {
 
 /// Parses `--cap NAME=FILE`.
 fn parse_cap(text: &str) -> Result<(String, PathBuf), String> {
-    let (name, file) = text.split_once('=').ok_or_else(|| format!("'{text}' is not NAME=FILE (e.g. inlet=inlet.stl)"))?;
+    let (name, file) =
+        text.split_once('=').ok_or_else(|| format!("'{text}' is not NAME=FILE (e.g. inlet=inlet.stl)"))?;
     vesselhex::input::check_end_name(name)?;
     if file.is_empty() {
         return Err(format!("'{text}' names no file after '='"));

@@ -6,12 +6,12 @@ use crate::annotate::annotate;
 use crate::blocks::{graded_levels, growth_ratio_for_first_cell, SectionTemplate};
 use crate::centerline::{Branch, CenterlineSample};
 use crate::centerline::{CenterlineTree, ForcedMerge};
+use crate::centerline_extract::names_of_ends;
 use crate::centerline_extract::{EndKind, VesselEnd};
 use crate::config::{MeshConfig, WallGrowth};
+use crate::end_names::{mesh_ends_at, name_mesh_ends};
 use crate::end_planes::EndCaps;
 use crate::error::{Error, Result};
-use crate::centerline_extract::names_of_ends;
-use crate::end_names::{mesh_ends_at, name_mesh_ends};
 use crate::input::{
     clean_surface, read_centerlines_within, read_surface_parts, read_surface_within, surface_files, Centerlines,
     HygieneReport, NamedCap, ReadLimits, TriangleSurface,

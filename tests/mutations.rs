@@ -111,11 +111,8 @@ fn a_folder_of_wall_and_caps_gives_openfoam_patches_named_after_its_files() {
     // Each patch is a name on its own line, its dictionary opening on the next (FoamFile is the
     // header's).
     let lines: Vec<&str> = boundary.lines().map(str::trim).collect();
-    let mut patches: Vec<String> = lines
-        .windows(2)
-        .filter(|w| w[1] == "{" && w[0] != "FoamFile")
-        .map(|w| w[0].to_string())
-        .collect();
+    let mut patches: Vec<String> =
+        lines.windows(2).filter(|w| w[1] == "{" && w[0] != "FoamFile").map(|w| w[0].to_string()).collect();
     patches.sort();
     assert_eq!(patches, files, "OpenFOAM's patches are not the files' names:\n{boundary}");
     let mut named: Vec<String> =
@@ -150,8 +147,9 @@ fn inward_and_outward_normals_give_byte_identical_meshes() {
     // The Y bifurcation fixture as shipped (normals out), and every triangle wound the other
     // way, also with patches flipped: the same mesh through every writer, byte for byte.
     let (vertices, triangles) = {
-        let s = vesselhex::input::read_surface(&fixtures_dir().join("y_bifurcation.stl"), vesselhex::units::LengthUnit::Mm)
-            .unwrap();
+        let s =
+            vesselhex::input::read_surface(&fixtures_dir().join("y_bifurcation.stl"), vesselhex::units::LengthUnit::Mm)
+                .unwrap();
         (s.vertices, s.triangles)
     };
     let root = temp_dir("windings");

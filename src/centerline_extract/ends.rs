@@ -184,7 +184,9 @@ pub fn names_of_ends(ends: &[VesselEnd], caps: &[NamedCap]) -> Result<Vec<Option
     let mut names: Vec<Option<String>> = vec![None; ends.len()];
     for cap in caps {
         let gap = |e: &VesselEnd| (e.centre - cap.centre).norm();
-        let nearest = (0..ends.len()).filter(|&k| ends[k].kind != EndKind::Sac).min_by(|&a, &b| gap(&ends[a]).total_cmp(&gap(&ends[b])));
+        let nearest = (0..ends.len())
+            .filter(|&k| ends[k].kind != EndKind::Sac)
+            .min_by(|&a, &b| gap(&ends[a]).total_cmp(&gap(&ends[b])));
         let Some(k) = nearest.filter(|&k| gap(&ends[k]) <= NAMED_END_REACH * ends[k].radius.max(cap.radius)) else {
             let c = cap.centre;
             return Err(format!(

@@ -78,7 +78,10 @@ impl HygieneReport {
         say(self.degenerate_triangles_dropped, "triangles without area dropped");
         say(self.duplicate_triangles_dropped, "repeated triangles dropped");
         say(self.triangles_flipped, "triangles wound against their neighbours flipped");
-        say(self.twisted_rim_edges, "edges of a strip twisted between holes at a rim (not orientable there) left as they are");
+        say(
+            self.twisted_rim_edges,
+            "edges of a strip twisted between holes at a rim (not orientable there) left as they are",
+        );
         if self.fragments_dropped > 0 {
             out.push(format!(
                 "{} small disconnected pieces ({} triangles, less than {}% of the area each) dropped",

@@ -20,9 +20,11 @@ pub use crate::resources::ReadLimits;
 use crate::units::LengthUnit;
 pub use arrays::{centerlines_from_arrays, surface_from_arrays, PolylineArrays};
 pub use hygiene::{clean_surface, weld, HygieneReport};
-pub use parts::{check_end_name, end_name_of_file, read_surface_parts, surface_files, NamedCap, SurfaceFiles, CAP_TAGS};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
+pub use parts::{
+    check_end_name, end_name_of_file, read_surface_parts, surface_files, NamedCap, SurfaceFiles, CAP_TAGS,
+};
 use polydata::PolyData;
 use std::path::{Path, PathBuf};
 

@@ -26,8 +26,7 @@ const ON_RIM: f64 = 1e-9;
 const SURFACE_EXTENSIONS: [&str; 3] = ["stl", "vtp", "vtk"];
 
 /// Names the mesh gives its own sets and patches: an end may not take them.
-const RESERVED: [&str; 8] =
-    ["wall", "lumen", "intima", "media", "adventitia", "extension", "lumen_wall", "outer_wall"];
+const RESERVED: [&str; 8] = ["wall", "lumen", "intima", "media", "adventitia", "extension", "lumen_wall", "outer_wall"];
 
 /// A cap in a file of its own.
 #[derive(Debug, Clone, PartialEq)]
@@ -66,7 +65,8 @@ pub fn check_end_name(name: &str) -> std::result::Result<(), String> {
              patches and Abaqus sets need"
         ));
     }
-    let taken = RESERVED.contains(&name) || ["lumen_", "wall_", "cut_", "extension_"].iter().any(|p| name.starts_with(p));
+    let taken =
+        RESERVED.contains(&name) || ["lumen_", "wall_", "cut_", "extension_"].iter().any(|p| name.starts_with(p));
     if taken {
         return Err(format!(
             "'{name}' cannot name an end: the mesh names its own sets and patches so (wall, lumen, the layers, and \
@@ -225,10 +225,10 @@ struct RimIndex {
 
 impl RimIndex {
     fn new(wall: &TriangleSurface) -> RimIndex {
-        let (lo, hi) = wall.vertices.iter().fold(
-            (Point3::from([f64::MAX; 3]), Point3::from([f64::MIN; 3])),
-            |(lo, hi), p| (lo.inf(p), hi.sup(p)),
-        );
+        let (lo, hi) = wall
+            .vertices
+            .iter()
+            .fold((Point3::from([f64::MAX; 3]), Point3::from([f64::MIN; 3])), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
         let tolerance = (ON_RIM * (hi - lo).norm()).max(f64::MIN_POSITIVE);
         let mut cells: std::collections::HashMap<[i64; 3], Vec<Point3<f64>>> = Default::default();
         for p in &wall.vertices {

@@ -166,11 +166,8 @@ impl Simplifier {
 
     /// The vertices sharing a live triangle with `v`.
     fn ring(&self, v: u32) -> Vec<u32> {
-        let mut r: Vec<u32> = self.at[v as usize]
-            .iter()
-            .flat_map(|&t| self.triangles[t as usize])
-            .filter(|&u| u != v)
-            .collect();
+        let mut r: Vec<u32> =
+            self.at[v as usize].iter().flat_map(|&t| self.triangles[t as usize]).filter(|&u| u != v).collect();
         r.sort_unstable();
         r.dedup();
         r
@@ -191,7 +188,9 @@ impl Simplifier {
             return None;
         }
         let (p, _) = self.target(a, b);
-        let moved = |tri: [u32; 3], vertices: &[Point3<f64>]| tri.map(|v| if v == a || v == b { p } else { vertices[v as usize] });
+        let moved = |tri: [u32; 3], vertices: &[Point3<f64>]| {
+            tri.map(|v| if v == a || v == b { p } else { vertices[v as usize] })
+        };
         for &t in self.at[a as usize].iter().chain(&self.at[b as usize]) {
             if shared.contains(&t) {
                 continue;
@@ -212,7 +211,8 @@ impl Simplifier {
                 self.triangles[t as usize].iter_mut().filter(|v| **v == b).for_each(|v| *v = a);
             }
         }
-        let mut live: Vec<u32> = self.at[a as usize].iter().chain(&from_b).copied().filter(|&t| self.alive[t as usize]).collect();
+        let mut live: Vec<u32> =
+            self.at[a as usize].iter().chain(&from_b).copied().filter(|&t| self.alive[t as usize]).collect();
         live.sort_unstable();
         live.dedup();
         for &c in &shared {

@@ -347,7 +347,8 @@ impl Base {
         let rotation = q.to_rotation_matrix();
         let unit = if mutation == Mutation::RotatedMetres { LengthUnit::M } else { LengthUnit::Cm };
         let scale = unit.from_mm();
-        let vertices = given.vertices.iter().map(|p| Point3::from((centre + rotation * (p - centre)).coords * scale)).collect();
+        let vertices =
+            given.vertices.iter().map(|p| Point3::from((centre + rotation * (p - centre)).coords * scale)).collect();
         let piece = Piece { vertices, ..given };
         let path = if unit == LengthUnit::M { dir.join("rotated.stl") } else { dir.join("rotated.vtp") };
         if unit == LengthUnit::M {
@@ -383,7 +384,8 @@ impl Base {
         }
         let wall = all.subset(&on_cap.iter().map(|c| !c).collect::<Vec<_>>());
         let ext = if folder { "vtp" } else { "stl" };
-        let save = |piece: &Piece, path: &Path| if folder { piece.write_vtp(path) } else { piece.write_stl_binary(path) };
+        let save =
+            |piece: &Piece, path: &Path| if folder { piece.write_vtp(path) } else { piece.write_stl_binary(path) };
         let wall_path = dir.join(format!("wall.{ext}"));
         save(&wall, &wall_path)?;
         let mut named = vec![];
@@ -448,8 +450,11 @@ fn flat_caps(surface: &TriangleSurface, clean: &TriangleSurface, extraction: &Ex
         .into_iter()
         .filter_map(|cap| {
             let (k, _) = cap_ends.iter().find(|(_, c)| (c - cap.end.centre).norm() < 1e-9 * (1.0 + c.coords.norm()))?;
-            let triangles: Option<Vec<u32>> =
-                cap.triangles.iter().map(|&t| index.get(&sorted_key(clean, &clean.triangles[t as usize])).copied()).collect();
+            let triangles: Option<Vec<u32>> = cap
+                .triangles
+                .iter()
+                .map(|&t| index.get(&sorted_key(clean, &clean.triangles[t as usize])).copied())
+                .collect();
             Some(CapPatch { triangles: triangles?, inlet: *k == extraction.inlet })
         })
         .collect()
@@ -460,8 +465,7 @@ fn flat_caps(surface: &TriangleSurface, clean: &TriangleSurface, extraction: &Ex
 fn open_end_loops(surface: &TriangleSurface, extraction: &Extraction) -> Vec<Vec<u32>> {
     let mut oriented = surface.triangles.clone();
     orient_consistently(&mut oriented);
-    let open: Vec<Point3<f64>> =
-        extraction.ends.iter().filter(|e| e.kind == EndKind::Open).map(|e| e.centre).collect();
+    let open: Vec<Point3<f64>> = extraction.ends.iter().filter(|e| e.kind == EndKind::Open).map(|e| e.centre).collect();
     boundary_loops(&oriented)
         .into_iter()
         .filter(|lp| {
@@ -560,7 +564,9 @@ fn flip_patches(triangles: &[[u32; 3]], share: f64, rng: &mut Rng) -> Vec<[u32; 
             if grown >= size || count >= goal {
                 break;
             }
-            patch.extend(neighbours[t].iter().filter(|&&u| (u as usize) < n && !flipped[u as usize]).map(|&u| u as usize));
+            patch.extend(
+                neighbours[t].iter().filter(|&&u| (u as usize) < n && !flipped[u as usize]).map(|&u| u as usize),
+            );
         }
     }
     triangles.iter().zip(&flipped).map(|(t, &f)| if f { [t[0], t[2], t[1]] } else { *t }).collect()
@@ -604,9 +610,10 @@ impl Piece {
                 index[v as usize]
             }));
         }
-        let tags = self.tags.as_ref().map(|(name, t)| {
-            (name.clone(), t.iter().zip(keep).filter(|(_, k)| **k).map(|(v, _)| *v).collect())
-        });
+        let tags = self
+            .tags
+            .as_ref()
+            .map(|(name, t)| (name.clone(), t.iter().zip(keep).filter(|(_, k)| **k).map(|(v, _)| *v).collect()));
         Piece { vertices, triangles, polygons: None, tags }
     }
 

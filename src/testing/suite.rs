@@ -78,7 +78,8 @@ pub fn mesh(binary: &Path, written: &Written, out: &Path, preset: &str, extra: &
     if run.error.is_empty() && run.exit != Some(0) && run.exit != Some(3) {
         run.error = stderr.lines().last().unwrap_or("no message").to_string();
     }
-    if let Some(report) = std::fs::read_to_string(out.join("report.json")).ok().and_then(|t| serde_json::from_str(&t).ok())
+    if let Some(report) =
+        std::fs::read_to_string(out.join("report.json")).ok().and_then(|t| serde_json::from_str(&t).ok())
     {
         read_report(&mut run, &report, written);
     }
@@ -97,7 +98,8 @@ fn read_report(run: &mut Run, report: &serde_json::Value, written: &Written) {
     let unmeshed = ["end_not_meshed", "branch_not_meshed", "sac_not_meshed"];
     let warnings = report["warnings"].as_array().into_iter().flatten();
     if let Some(w) = warnings.clone().find(|w| unmeshed.iter().any(|k| w["kind"] == *k)) {
-        run.error = format!("{}: {}", w["kind"].as_str().unwrap_or_default(), w["message"].as_str().unwrap_or_default());
+        run.error =
+            format!("{}: {}", w["kind"].as_str().unwrap_or_default(), w["message"].as_str().unwrap_or_default());
     }
     run.ends = report["ends"]
         .as_array()
@@ -168,8 +170,7 @@ fn ends_differ(run: &Run, reference: &Run) -> Option<String> {
             ));
         }
     }
-    (run.branches != reference.branches)
-        .then(|| format!("{} branches, as given {}", run.branches, reference.branches))
+    (run.branches != reference.branches).then(|| format!("{} branches, as given {}", run.branches, reference.branches))
 }
 
 /// Where a failure's cause lies, from its message: the junction mesher and the cross-sections
