@@ -15,6 +15,7 @@ pub mod blocks;
 pub mod centerline;
 pub mod centerline_extract;
 pub mod config;
+pub mod end_names;
 pub mod end_planes;
 pub mod error;
 pub mod extensions;

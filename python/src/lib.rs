@@ -59,6 +59,28 @@ fn unit(name: Option<&str>, what: &str) -> PyResult<Option<LengthUnit>> {
     name.map(|u| u.parse::<LengthUnit>().map_err(|e| config_error(format!("{what}={u:?}: {e}")))).transpose()
 }
 
+/// A surface given as a file (or a folder of wall and caps, or a wall with `caps`) or as arrays,
+/// with the caps given in files of their own.
+fn read_surface_and_caps(
+    path: Option<PathBuf>,
+    arrays: Option<(PyReadonlyArray2<f64>, PyReadonlyArray2<i64>)>,
+    caps: Vec<(String, PathBuf)>,
+    units: LengthUnit,
+    max_memory: u64,
+) -> PyResult<(TriangleSurface, Vec<vesselhex::input::NamedCap>)> {
+    let limits = vesselhex::input::ReadLimits::within(max_memory);
+    let in_parts = path.as_ref().is_some_and(|p| !caps.is_empty() || p.is_dir());
+    let (Some(path), true) = (&path, in_parts) else {
+        if !caps.is_empty() {
+            return Err(config_error("caps come with a wall file as the surface, not with arrays".into()));
+        }
+        return read_surface(path, arrays, units, max_memory).map(|s| (s, vec![]));
+    };
+    let files = vesselhex::input::surface_files(path, &caps).map_err(to_py)?;
+    let (surface, _, named) = vesselhex::input::read_surface_parts(&files, units, &limits).map_err(to_py)?;
+    Ok((surface, named))
+}
+
 /// A surface given as a file or as arrays.
 fn read_surface(
     path: Option<PathBuf>,
@@ -164,7 +186,7 @@ fn extract_options(inlet: Option<[f64; 3]>, ends: Vec<[f64; 3]>, units: LengthUn
     ExtractOptions {
         inlet: inlet.map_or(InletChoice::Largest, |p| InletChoice::Nearest(mm(p))),
         ends: ends.into_iter().map(mm).collect(),
-        sacs: vec![],
+        ..Default::default()
     }
 }
 
@@ -187,7 +209,7 @@ fn progress_calling(callback: Option<Py<PyAny>>, raised: std::sync::Arc<std::syn
 #[pyfunction]
 #[pyo3(signature = (*, surface_path=None, surface_arrays=None, centerlines_path=None, centerline_arrays=None,
     centerlines_computed=None, preset=None, config_path=None, config_dict=None, units=None, centerline_units=None,
-    output_units=None, formats=None, inlet=None, ends=vec![], max_memory=None, progress=None))]
+    output_units=None, formats=None, inlet=None, ends=vec![], max_memory=None, progress=None, caps=vec![]))]
 #[allow(clippy::too_many_arguments)]
 fn mesh(
     py: Python<'_>,
@@ -207,7 +229,11 @@ fn mesh(
     ends: Vec<[f64; 3]>,
     max_memory: Option<u64>,
     progress: Option<Py<PyAny>>,
+    caps: Vec<(String, PathBuf)>,
 ) -> PyResult<Mesh> {
+    for (name, _) in &caps {
+        vesselhex::input::check_end_name(name).map_err(|e| config_error(format!("caps: {e}")))?;
+    }
     let config = build_config(
         preset,
         config_path.clone(),
@@ -221,7 +247,8 @@ fn mesh(
     let raised = std::sync::Arc::new(std::sync::Mutex::new(None));
     let mut progress = progress_calling(progress, raised.clone());
     progress.stage("reading");
-    let surface = read_surface(surface_path.clone(), surface_arrays, config.units, max_memory)?;
+    let cap_files: Vec<PathBuf> = caps.iter().map(|(_, file)| file.clone()).collect();
+    let (surface, caps) = read_surface_and_caps(surface_path.clone(), surface_arrays, caps, config.units, max_memory)?;
     let cl_units = centerline_units.unwrap_or(config.units);
     let centerlines = match (centerlines_path.clone(), centerline_arrays, centerlines_computed) {
         (Some(path), None, None) => {
@@ -242,7 +269,7 @@ fn mesh(
         (None, None, None) => CenterlineSource::Extract(extract_options(inlet, ends, config.units)),
         _ => return Err(config_error("give the centerlines one way only".into())),
     };
-    let settings = MeshSettings { config: config.clone(), centerline_units, max_memory, warnings: vec![] };
+    let settings = MeshSettings { config: config.clone(), centerline_units, max_memory, warnings: vec![], caps };
     let vessel = py.detach(move || {
         let vessel = vesselhex::pipeline::mesh_surface(surface, centerlines, settings, &mut progress);
         progress.finish();
@@ -252,7 +279,8 @@ fn mesh(
         return Err(e);
     }
     let (vessel, timings) = vessel.map_err(to_py)?;
-    let inputs: Vec<PathBuf> = [surface_path, centerlines_path, config_path].into_iter().flatten().collect();
+    let inputs: Vec<PathBuf> =
+        [surface_path, centerlines_path, config_path].into_iter().flatten().chain(cap_files).collect();
     Ok(Mesh { vessel, config, timings, inputs })
 }
 

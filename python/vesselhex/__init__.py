@@ -388,12 +388,14 @@ def mesh(
     ends: Sequence[Point] = (),
     max_memory: Optional[int] = None,
     progress: Union[bool, Callable[[str], Any]] = False,
+    caps: Optional[Mapping[str, PathLike]] = None,
 ) -> Mesh:
     """Meshes a vessel, as ``vesselhex mesh`` does, and returns the :class:`Mesh` in memory.
 
     Args:
-        surface: the lumen surface: a file (``.stl``, ``.vtp``, ``.vtk``), ``(points, triangles)``
-            arrays, or a PyVista, meshio or VTK polydata object.
+        surface: the lumen surface: a file (``.stl``, ``.vtp``, ``.vtk``), a folder of the wall
+            and its caps (as ``--surface DIR``), ``(points, triangles)`` arrays, or a PyVista,
+            meshio or VTK polydata object.
         centerlines: a VMTK ``.vtp``/``.vtk`` or ``x,y,z,r`` ``.csv`` file, a :class:`Centerlines`,
             an ``(n, 4)`` array (x, y, z, radius; ``(n, 3)`` without radius) or a list of them,
             or polydata with lines; ``None`` computes them from the surface.
@@ -408,6 +410,9 @@ def mesh(
         ends: without centerlines, a point on each rounded cap.
         max_memory: bytes the run may plan to use (default three quarters of the machine's).
         progress: ``True`` prints each stage on stderr; a function is called with each stage's name.
+        caps: with a wall file as ``surface``, its caps in files of their own, by name, e.g.
+            ``{"inlet": "inlet.stl", "outlet_lica": "lica.stl"}`` (as ``--cap NAME=FILE``): each
+            names the end it closes (OpenFOAM patch, sets, ``report["ends"]``).
 
     Raises:
         VesselhexError: ``InputError``, ``ConfigError``, ``GeometryError`` or ``FileError``, with
@@ -443,5 +448,6 @@ def mesh(
         ends=[_point(e, "ends") for e in ends],
         max_memory=max_memory,
         progress=_progress(progress),
+        caps=[(str(name), os.fspath(file)) for name, file in (caps or {}).items()],
     )
     return Mesh(native)

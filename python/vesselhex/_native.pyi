@@ -62,6 +62,7 @@ def mesh(
     ends: Sequence[Point] = ...,
     max_memory: Optional[int] = None,
     progress: Optional[Callable[[str], Any]] = None,
+    caps: Sequence[Tuple[str, str]] = ...,
 ) -> Mesh: ...
 def centerlines(
     *,
