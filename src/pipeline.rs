@@ -6,13 +6,15 @@ use crate::annotate::annotate;
 use crate::blocks::{graded_levels, growth_ratio_for_first_cell, SectionTemplate};
 use crate::centerline::{Branch, CenterlineSample};
 use crate::centerline::{CenterlineTree, ForcedMerge};
+use crate::centerline_extract::names_of_ends;
 use crate::centerline_extract::{EndKind, VesselEnd};
 use crate::config::{MeshConfig, WallGrowth};
+use crate::end_names::{mesh_ends_at, name_mesh_ends};
 use crate::end_planes::EndCaps;
 use crate::error::{Error, Result};
 use crate::input::{
-    clean_surface, read_centerlines_within, read_surface_within, Centerlines, HygieneReport, ReadLimits,
-    TriangleSurface,
+    clean_surface, read_centerlines_within, read_surface_parts, read_surface_within, surface_files, Centerlines,
+    HygieneReport, NamedCap, ReadLimits, TriangleSurface,
 };
 use crate::junction::{
     allowed_turns, analyse_junctions, check_junction_spacing, find_junction_overlap, keep_fold_cores_inside,
@@ -816,7 +818,10 @@ fn refuse_inverted(
 /// Everything `vesselhex mesh` was asked.
 #[derive(Debug, Clone)]
 pub struct MeshRequest {
+    /// The surface: a file, or a folder of the wall and its caps (see [`crate::input::surface_files`]).
     pub surface: PathBuf,
+    /// Caps in files of their own (`--cap NAME=FILE`), each naming its end.
+    pub caps: Vec<(String, PathBuf)>,
     pub centerlines: Option<PathBuf>,
     /// Unit of the centerline file when it differs from the surface's.
     pub centerline_units: Option<crate::units::LengthUnit>,
@@ -871,8 +876,10 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let inputs: Vec<&Path> = [Some(&request.surface), request.centerlines.as_ref(), request.case_file.as_ref()]
         .into_iter()
         .flatten()
+        .chain(request.caps.iter().map(|(_, file)| file))
         .map(PathBuf::as_path)
         .collect();
+    let files = surface_files(&request.surface, &request.caps)?;
     crate::finishing::check_wall_surfaces(config)?;
     let output = claim_output(&request.output, &inputs, config, request.force)?;
     let limits = ReadLimits::within(request.max_memory);
@@ -880,7 +887,12 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let stages = 10 + u64::from(request.centerlines.is_none()) + crate::finishing::stages(config);
     let mut progress = Progress::new(request.quiet, stages);
     progress.stage("reading");
-    let (surface, _) = read_surface_within(&request.surface, config.units, &limits)?;
+    let (surface, caps) = if files.caps.is_empty() && files.walls.len() == 1 {
+        (read_surface_within(&files.walls[0], config.units, &limits)?.0, vec![])
+    } else {
+        let (surface, _, caps) = read_surface_parts(&files, config.units, &limits)?;
+        (surface, caps)
+    };
     let centerline_units = request.centerline_units.unwrap_or(config.units);
     let centerlines = match &request.centerlines {
         Some(path) => CenterlineSource::Given(read_centerlines_within(path, centerline_units, &limits)?),
@@ -891,6 +903,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
         centerline_units: request.centerline_units,
         max_memory: request.max_memory,
         warnings: request.warnings.clone(),
+        caps,
     };
     let vessel = mesh_surface(surface, centerlines, settings, &mut progress)?;
     write_vessel(&vessel, config, output, request.reproducible, &mut progress)
@@ -1006,6 +1019,7 @@ fn end_reports(
     ends.iter()
         .enumerate()
         .map(|(k, e)| EndReport {
+            name: None,
             position: (e.centre.coords * scale).into(),
             radius: e.radius * scale,
             kind: e.kind.name(),
@@ -1240,6 +1254,9 @@ pub struct MeshSettings {
     pub max_memory: u64,
     /// Warnings found before the run, reported with the rest.
     pub warnings: Vec<Warning>,
+    /// Caps given in files of their own (see [`crate::input::read_surface_parts`]): each names
+    /// the end it closes or covers.
+    pub caps: Vec<NamedCap>,
 }
 
 /// A vessel meshed and not yet written: the mesh and what its report needs. What `run` writes,
@@ -1255,6 +1272,8 @@ pub struct MeshedVessel {
     /// the inlet.
     pub ends: Vec<VesselEnd>,
     pub inlet: usize,
+    /// The name each end was given by a cap (parallel to `ends`).
+    pub end_names: Vec<Option<String>>,
     /// What surface hygiene changed.
     pub hygiene: HygieneReport,
     /// Refinement, segmented walls and flow extensions done after meshing (millimetres).
@@ -1281,15 +1300,20 @@ pub fn mesh_surface(
     progress.stage("surface hygiene");
     let (surface, hygiene) = clean_surface(surface)?;
     settings.warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
+    let mut found_names = vec![];
     let (centerlines, centerline_source, found_ends) = match centerlines {
         CenterlineSource::Given(centerlines) => {
             let source = centerlines.source.clone();
             (centerlines, source, None)
         }
-        CenterlineSource::Extract(options) => {
+        CenterlineSource::Extract(mut options) => {
             progress.stage("centerline extraction");
+            if options.caps.is_empty() {
+                options.caps = settings.caps.clone();
+            }
             let extraction = crate::centerline_extract::extract_centerlines(&surface, &options)?;
             settings.warnings.extend(extraction.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
+            found_names = extraction.end_names;
             let ends = Some((extraction.ends, extraction.inlet));
             (extraction.centerlines, PathBuf::from("(computed from the surface)"), ends)
         }
@@ -1336,10 +1360,20 @@ pub fn mesh_surface(
         Err(e) => return Err(name_winding(e, &surface)),
     };
     settings.warnings.append(&mut meshed.notes);
+    // The ends named by caps: found on the surface, or the given centerlines' ends.
+    let (ends, inlet) = found_ends.clone().unwrap_or_else(|| tree_ends(&meshed.tree));
+    if found_ends.is_none() {
+        found_names = names_of_ends(&ends, &settings.caps).map_err(|e| Error::input(&surface.source, e))?;
+    }
+    name_mesh_ends(&mut meshed.mesh, &ends, &found_names);
     let openings = side_openings(&surface, found_ends.as_ref().map_or(&[][..], |(e, _)| e), &short_branches);
     let limits = ReadLimits::within(settings.max_memory);
     let asked: Vec<SideOpening> = openings.iter().flatten().copied().collect();
-    let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress, &asked)?;
+    let mut additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress, &asked)?;
+    // An end opened in the side of the mesh is named as the others.
+    for (old, new) in name_mesh_ends(&mut meshed.mesh, &ends, &found_names) {
+        additions.side_ends.iter_mut().filter(|s| s.end == old).for_each(|s| s.end = new.clone());
+    }
     let mut left_out_mm = vec![];
     for ((end_mm, message), opening) in short_branches.into_iter().zip(&openings) {
         let [x, y, z] = end_mm;
@@ -1366,7 +1400,7 @@ pub fn mesh_surface(
             }
         });
     }
-    let (ends, inlet) = found_ends.unwrap_or_else(|| tree_ends(&meshed.tree));
+    found_names.resize(ends.len(), None);
     Ok(MeshedVessel {
         meshed,
         surface,
@@ -1374,6 +1408,7 @@ pub fn mesh_surface(
         centerlines,
         ends,
         inlet,
+        end_names: found_names,
         hygiene,
         additions,
         settings,
@@ -1481,7 +1516,12 @@ pub fn write_vessel(
 pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(String, f64)]) -> Report {
     let mut warnings = vessel.settings.warnings.clone();
     let side_ends: Vec<[f64; 3]> = vessel.additions.side_ends.iter().map(|s| s.centre).collect();
-    let ends = end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, &side_ends, config.output_units.from_mm());
+    let mut ends =
+        end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, &side_ends, config.output_units.from_mm());
+    let mesh = &vessel.meshed.mesh;
+    for ((report, at), given) in ends.iter_mut().zip(mesh_ends_at(mesh, &vessel.ends)).zip(&vessel.end_names) {
+        report.name = at.map(|m| mesh.ends[m].name.clone()).or_else(|| given.clone());
+    }
     let left_out = ends_left_out(&vessel.ends, &vessel.left_out_mm);
     warnings.extend(ends_not_meshed(&ends, &left_out, config.output_units));
     warnings.extend(ends_cut_short(&vessel.meshed, config));

@@ -91,6 +91,10 @@ pub struct JunctionReport {
 /// One vessel end: found on the surface (or given), and whether the mesh reaches it.
 #[derive(Debug, Clone, Serialize)]
 pub struct EndReport {
+    /// The end's name in the mesh (its OpenFOAM patch, its sets `lumen_<name>` and
+    /// `wall_<name>`): `inlet`, `outlet` or `outlet_1`, ..., or the name of the cap given for it;
+    /// for an end not meshed, the cap's name or null.
+    pub name: Option<String>,
     /// Centre of the end (output unit): a loop's or cap's centre, a dome's inscribed ball, a
     /// given point's ball, or a given centerline's end point.
     pub position: [f64; 3],
