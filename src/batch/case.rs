@@ -42,12 +42,15 @@ fn request(case: &Case, settings: &Settings, config: MeshConfig, output: &Path) 
     let mm = |p: &[f64; 3]| nalgebra::Point3::from(*p) * config.units.to_mm();
     MeshRequest {
         surface: case.surface.clone(),
+        // A case's caps come with its surface as a folder of the wall and its caps.
+        caps: vec![],
         centerlines: case.centerlines.clone(),
         centerline_units: case.centerline_units,
         extraction: ExtractOptions {
             inlet: case.inlet.as_ref().map_or(InletChoice::Largest, |p| InletChoice::Nearest(mm(p))),
             ends: case.ends.iter().map(mm).collect(),
             sacs: case.sacs.iter().map(mm).collect(),
+            caps: vec![],
         },
         case_file: case.config.clone().or(settings.config.clone()),
         output: output.join(&case.name),
