@@ -120,7 +120,7 @@ struct MeshArgs {
     /// Memory the run may plan to use, e.g. 8G or 512M: a mesh estimated to need more is refused
     /// before it is built, and no input file larger than a tenth of it is read [default: three
     /// quarters of the machine's memory].
-    #[arg(long, value_name = "SIZE", value_parser = vesselhex::resources::parse_size)]
+    #[arg(long, value_name = "SIZE", value_parser = vesselhex::io::memory::parse_size)]
     max_memory: Option<u64>,
     /// No progress display.
     #[arg(long)]
@@ -198,7 +198,8 @@ fn parse_point(text: &str, scale: f64) -> vesselhex::Result<nalgebra::Point3<f64
 }
 
 fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
-    use vesselhex::centerline_extract::{extract_centerlines, write_vtp, ExtractOptions, InletChoice};
+    use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions, InletChoice};
+    use vesselhex::writers::centerlines::write_vtp;
     let units = args.units.unwrap_or(LengthUnit::Mm);
     let scale = units.to_mm();
     let inlet = match args.inlet.as_str() {
@@ -215,7 +216,7 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
     write_vtp(&extraction.centerlines, units.from_mm(), &args.output)?;
     let split_tree = match &args.branch_split {
         Some(path) => {
-            Some((vesselhex::centerline_extract::write_branch_split(&extraction, units.from_mm(), path)?, path))
+            Some((vesselhex::writers::centerlines::write_branch_split(&extraction, units.from_mm(), path)?, path))
         }
         None => None,
     };
@@ -335,7 +336,7 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
         case_file: args.config.clone(),
         output: args.output.clone(),
         force: args.force,
-        max_memory: args.max_memory.unwrap_or_else(vesselhex::resources::default_max_memory),
+        max_memory: args.max_memory.unwrap_or_else(vesselhex::io::memory::default_max_memory),
         quiet: args.quiet,
         reproducible: args.reproducible,
         warnings,

@@ -27,7 +27,7 @@
 //! [`write_fixture`] writes the binary STL and the centerline CSV that the mesher's tests read,
 //! and [`AnalyticVessel::distance_to_wall`] gives the exact distance those tests compare against.
 
-use crate::error::{Error, Result};
+use crate::data::error::{Error, Result};
 use crate::writers::write_atomic;
 use nalgebra::{Point3, Vector3};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};

@@ -7,12 +7,12 @@ pub mod decimate;
 pub mod mutations;
 pub mod suite;
 
-use crate::config::MeshConfig;
-use crate::error::Result;
-use crate::input::{CenterlinePolyline, Centerlines, TriangleSurface};
-use crate::mesh::{sets, ElementFace, Region, Triad, VesselEnd, VesselMesh};
+use crate::data::config::MeshConfig;
+use crate::data::error::Result;
+use crate::io::input::{CenterlinePolyline, Centerlines, TriangleSurface};
+use crate::geometry::mesh::{sets, ElementFace, Region, Triad, VesselEnd, VesselMesh};
 use crate::pipeline::{mesh_vessel, Meshed};
-use crate::progress::Progress;
+use crate::pipeline::progress::Progress;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Rotation3, Vector3};
 
@@ -304,8 +304,8 @@ mod tests {
                     assert!((m.nodes[n as usize] - end.centre).dot(&end.outward_normal).abs() < 1e-9, "{set}");
                 }
                 for f in &m.face_sets[&set] {
-                    let q = crate::mesh::face_nodes(&m.hexes[f.element as usize], f.face as usize);
-                    let a = crate::mesh::quad_area_vector(q.map(|n| m.nodes[n as usize]));
+                    let q = crate::geometry::mesh::face_nodes(&m.hexes[f.element as usize], f.face as usize);
+                    let a = crate::geometry::mesh::quad_area_vector(q.map(|n| m.nodes[n as usize]));
                     assert!(a.normalize().dot(&end.outward_normal) > 1.0 - 1e-9, "{set}");
                     assert_eq!(m.branch_of[f.element as usize] as usize, end.branch, "{set}");
                 }

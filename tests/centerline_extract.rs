@@ -15,7 +15,8 @@ use common::*;
 use nalgebra::{Point3, Vector3};
 use std::path::Path;
 use std::time::Instant;
-use vesselhex::centerline_extract::{extract_centerlines, write_vtp, ExtractOptions, Extraction};
+use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions, Extraction};
+use vesselhex::writers::centerlines::write_vtp;
 use vesselhex::input::{read_centerlines, read_surface, CenterlinePolyline, TriangleSurface};
 use vesselhex::progress::Progress;
 use vesselhex::surface::LumenSurface;
@@ -363,7 +364,7 @@ fn the_mesh_starts_at_the_inlet_the_extraction_chose() {
     let settings = MeshSettings {
         config: MeshConfig::preset(Preset::Coarse),
         centerline_units: None,
-        max_memory: vesselhex::resources::default_max_memory(),
+        max_memory: vesselhex::io::memory::default_max_memory(),
         warnings: vec![],
         caps: vec![],
     };

@@ -11,7 +11,7 @@ use vesselhex::mesh::Region;
 use vesselhex::units::{LengthUnit, MechanicalUnits};
 use vesselhex::writers::febio::FebioElement;
 use vesselhex::writers::inp::ElementType;
-use vesselhex::writers::material::WallMaterial;
+use vesselhex::config::material::WallMaterial;
 use vesselhex::writers::{abaqus, calculix, febio, WriteOptions};
 
 type Axes = BTreeMap<u32, [f64; 6]>;

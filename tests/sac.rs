@@ -143,7 +143,7 @@ fn a_sac_holding_a_junction_is_its_own_region() {
     let settings = MeshSettings {
         config: MeshConfig::preset(Preset::Coarse),
         centerline_units: None,
-        max_memory: vesselhex::resources::default_max_memory(),
+        max_memory: vesselhex::io::memory::default_max_memory(),
         warnings: vec![],
         caps: vec![],
     };

@@ -243,7 +243,7 @@ fn mesh(
         formats,
     )?;
     let centerline_units = unit(centerline_units, "centerline_units")?;
-    let max_memory = max_memory.unwrap_or_else(vesselhex::resources::default_max_memory);
+    let max_memory = max_memory.unwrap_or_else(vesselhex::io::memory::default_max_memory);
     let raised = std::sync::Arc::new(std::sync::Mutex::new(None));
     let mut progress = progress_calling(progress, raised.clone());
     progress.stage("reading");
@@ -500,9 +500,9 @@ impl Centerlines {
     fn write(&self, py: Python<'_>, path: PathBuf, branch_split: Option<PathBuf>) -> PyResult<()> {
         let scale = self.units.from_mm();
         py.detach(|| {
-            vesselhex::centerline_extract::write_vtp(&self.extraction.centerlines, scale, &path)?;
+            vesselhex::writers::centerlines::write_vtp(&self.extraction.centerlines, scale, &path)?;
             if let Some(split) = &branch_split {
-                vesselhex::centerline_extract::write_branch_split(&self.extraction, scale, split)?;
+                vesselhex::writers::centerlines::write_branch_split(&self.extraction, scale, split)?;
             }
             Ok(())
         })
@@ -523,7 +523,7 @@ fn centerlines(
     max_memory: Option<u64>,
 ) -> PyResult<Centerlines> {
     let units = unit(units, "units")?.unwrap_or(LengthUnit::Mm);
-    let max_memory = max_memory.unwrap_or_else(vesselhex::resources::default_max_memory);
+    let max_memory = max_memory.unwrap_or_else(vesselhex::io::memory::default_max_memory);
     let surface = read_surface(surface_path, surface_arrays, units, max_memory)?;
     let options = extract_options(inlet, ends, units);
     // As `vesselhex centerlines` does: the surface cleaned first, its repairs noted first.

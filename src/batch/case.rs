@@ -4,9 +4,9 @@
 use super::manifest::Case;
 use super::summary::{Row, Status};
 use super::Settings;
-use crate::centerline_extract::{ExtractOptions, InletChoice};
-use crate::config::MeshConfig;
-use crate::error::{Error, Result};
+use crate::stages::centerline::extract::{ExtractOptions, InletChoice};
+use crate::data::config::MeshConfig;
+use crate::data::error::{Error, Result};
 use crate::pipeline::MeshRequest;
 use std::hash::Hasher;
 use std::path::{Path, PathBuf};
@@ -55,7 +55,7 @@ fn request(case: &Case, settings: &Settings, config: MeshConfig, output: &Path) 
         case_file: case.config.clone().or(settings.config.clone()),
         output: output.join(&case.name),
         force: settings.force,
-        max_memory: settings.max_memory.unwrap_or_else(crate::resources::default_max_memory),
+        max_memory: settings.max_memory.unwrap_or_else(crate::io::memory::default_max_memory),
         quiet: true,
         reproducible: settings.reproducible,
         warnings: vec![],
@@ -125,8 +125,8 @@ fn hash_file(path: &Path, hash: &mut impl Hasher) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::Preset;
-    use crate::units::LengthUnit;
+    use crate::data::config::Preset;
+    use crate::data::units::LengthUnit;
 
     fn fixture_case() -> Case {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");

@@ -184,7 +184,7 @@ fn signal_name(signal: i32) -> &'static str {
         6 => "SIGABRT: an abort, e.g. memory that could not be allocated",
         7 => "SIGBUS",
         11 => "SIGSEGV: a crash",
-        s => crate::output::signal_name(s),
+        s => crate::io::output::signal_name(s),
     }
 }
 

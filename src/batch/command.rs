@@ -3,8 +3,8 @@
 //! and the summary in `DIR/summary.csv` and `DIR/summary.json`.
 
 use super::{Batch, ChildCommand, Event, Row, Settings, Status};
-use crate::config::Preset;
-use crate::units::LengthUnit;
+use crate::data::config::Preset;
+use crate::data::units::LengthUnit;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -45,7 +45,7 @@ pub struct BatchArgs {
     /// Memory each case may plan to use, e.g. 4G: a case estimated to need more is refused
     /// before it is built, and no more jobs run at once than fit in the memory available
     /// [default: the memory available, shared among the jobs].
-    #[arg(long, value_name = "SIZE", value_parser = crate::resources::parse_size)]
+    #[arg(long, value_name = "SIZE", value_parser = crate::io::memory::parse_size)]
     max_memory: Option<u64>,
     /// Resolution preset of the cases that set none: coarse, medium, fine.
     #[arg(long)]
@@ -79,7 +79,7 @@ pub fn run_command(args: BatchArgs) -> ExitCode {
     match run(args) {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
-            eprintln!("vesselhex: error: {}", crate::error::one_line(&e.to_string()));
+            eprintln!("vesselhex: error: {}", crate::data::error::one_line(&e.to_string()));
             ExitCode::from(super::EXIT_ERROR as u8)
         }
     }

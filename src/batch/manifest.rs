@@ -10,9 +10,9 @@
 //!
 //! Relative paths are taken from the manifest's folder.
 
-use crate::config::Preset;
-use crate::error::{Error, Result};
-use crate::units::LengthUnit;
+use crate::data::config::Preset;
+use crate::data::error::{Error, Result};
+use crate::data::units::LengthUnit;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use std::path::{Path, PathBuf};
@@ -68,8 +68,8 @@ const RESERVED: [&str; 2] = ["summary.csv", "summary.json"];
 
 /// Reads a manifest: JSON when it ends in `.json` or starts with `{` or `[`, else CSV.
 pub fn read_manifest(path: &Path) -> Result<Vec<Case>> {
-    let bytes = crate::input::read_regular_file(path, MAX_MANIFEST_BYTES, "cannot read the manifest")?;
-    let text = crate::input::text_of(bytes).map_err(|e| Error::input(path, e))?;
+    let bytes = crate::io::input::read_regular_file(path, MAX_MANIFEST_BYTES, "cannot read the manifest")?;
+    let text = crate::io::input::text_of(bytes).map_err(|e| Error::input(path, e))?;
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let json =
@@ -81,7 +81,7 @@ pub fn read_manifest(path: &Path) -> Result<Vec<Case>> {
 /// The rows of a JSON manifest: `{"cases": [...]}` or a list of objects.
 fn json_rows(text: &str, path: &Path) -> Result<Vec<Map<String, Value>>> {
     let value: Value = serde_json::from_str(text)
-        .map_err(|e| Error::input(path, format!("not valid JSON: {}", crate::error::one_line(&e.to_string()))))?;
+        .map_err(|e| Error::input(path, format!("not valid JSON: {}", crate::data::error::one_line(&e.to_string()))))?;
     let list = match value {
         Value::Object(mut o) if o.contains_key("cases") => o.remove("cases").unwrap_or_default(),
         other => other,
@@ -102,7 +102,7 @@ fn json_rows(text: &str, path: &Path) -> Result<Vec<Map<String, Value>>> {
 /// The rows of a CSV manifest, each field a string (empty ones left out).
 fn csv_rows(text: &str, path: &Path) -> Result<Vec<Map<String, Value>>> {
     let mut reader = csv::ReaderBuilder::new().comment(Some(b'#')).trim(csv::Trim::All).from_reader(text.as_bytes());
-    let bad = |e: csv::Error| Error::input(path, format!("not valid CSV: {}", crate::error::one_line(&e.to_string())));
+    let bad = |e: csv::Error| Error::input(path, format!("not valid CSV: {}", crate::data::error::one_line(&e.to_string())));
     let header: Vec<String> = reader.headers().map_err(bad)?.iter().map(|h| h.to_ascii_lowercase()).collect();
     if let Some(unknown) = header.iter().find(|h| !KEYS.contains(&h.as_str())) {
         return Err(Error::input(

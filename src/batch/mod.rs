@@ -22,10 +22,10 @@ pub use child::{run_case_in_child, ChildCommand, Job};
 pub use manifest::{read_manifest, Case};
 pub use summary::{Row, Status};
 
-use crate::config::Preset;
-use crate::error::{Error, Result};
-use crate::resources::show_bytes;
-use crate::units::LengthUnit;
+use crate::data::config::Preset;
+use crate::data::error::{Error, Result};
+use crate::data::diagnostics::show_bytes;
+use crate::data::units::LengthUnit;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -176,7 +176,7 @@ impl Batch {
     /// How the pending cases run here with `jobs` jobs, in the memory available now (see
     /// [`memory_plan`]).
     pub fn plan_memory(&self, jobs: usize) -> MemoryPlan {
-        let available = crate::resources::available_memory().unwrap_or_else(crate::resources::default_max_memory);
+        let available = crate::io::memory::available_memory().unwrap_or_else(crate::io::memory::default_max_memory);
         memory_plan(jobs.min(self.pending().count()).max(1), self.settings.max_memory, available)
     }
 
@@ -239,8 +239,8 @@ impl Batch {
 /// memory of the run that made it; `None` when the report is missing, unreadable, or made with
 /// another configuration than the case's now (the folder meshed again by hand since).
 fn done_row(case: &Case, settings: &Settings, before: &Row, output: &Path) -> Option<Row> {
-    let path = output.join(&case.name).join(crate::output::MARKER);
-    let bytes = crate::input::read_regular_file(&path, 64 << 20, "cannot read the report").ok()?;
+    let path = output.join(&case.name).join(crate::io::output::MARKER);
+    let bytes = crate::io::input::read_regular_file(&path, 64 << 20, "cannot read the report").ok()?;
     let report: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
     let config = serde_json::to_value(case::effective_config(case, settings).ok()?).ok()?;
     if report.get("config") != Some(&config) {

@@ -1,7 +1,7 @@
 //! The summary of a batch: one [`Row`] per case, built from the case's `report.json` (or from
 //! its failure), written as `summary.csv` and `summary.json` in the batch's output folder.
 
-use crate::error::{Error, Result};
+use crate::data::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::path::Path;
@@ -67,7 +67,7 @@ impl Row {
             .flatten()
             .find(|w| NOT_MESHED.contains(&w["kind"].as_str().unwrap_or_default()))
             .and_then(|w| w["message"].as_str())
-            .map(|m| if all_meshed { String::new() } else { crate::error::one_line(m) });
+            .map(|m| if all_meshed { String::new() } else { crate::data::error::one_line(m) });
         Row {
             case: case.to_string(),
             status,
@@ -105,7 +105,7 @@ impl Row {
             within_bars: None,
             seconds: 0.0,
             peak_memory_mib: None,
-            cause: crate::error::one_line(cause),
+            cause: crate::data::error::one_line(cause),
             fingerprint: None,
         }
     }
@@ -141,7 +141,7 @@ pub fn write_summary(rows: &[Row], folder: &Path) -> Result<()> {
 /// one: its cases are then all meshed again).
 pub fn read_summary(folder: &Path) -> Vec<Row> {
     let path = folder.join(SUMMARY_JSON);
-    let Ok(bytes) = crate::input::read_regular_file(&path, MAX_SUMMARY_BYTES, "cannot read the summary") else {
+    let Ok(bytes) = crate::io::input::read_regular_file(&path, MAX_SUMMARY_BYTES, "cannot read the summary") else {
         return vec![];
     };
     serde_json::from_slice(&bytes).unwrap_or_default()

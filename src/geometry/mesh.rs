@@ -17,6 +17,7 @@
 //!   of increasing angle;
 //! * face 5 (S6) is the inner (centerline-side) face, face 3 (S4) the outer (wall-side) face.
 
+pub use crate::data::region::{Region, WallLayer};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
@@ -102,45 +103,6 @@ pub fn is_sac(branch_name: &str) -> bool {
     branch_name == "sac" || branch_name.strip_prefix("sac_").is_some_and(|k| k.parse::<usize>().is_ok())
 }
 
-/// What a hexahedron belongs to.
-///
-/// Elements are ordered by region in this order (the derived order), so each region's elements
-/// are contiguous: a flow extension's come last, after the wall, so that the vessel's own nodes
-/// and elements keep their numbers whether or not it is extended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, PartialOrd, Ord)]
-#[serde(rename_all = "lowercase")]
-pub enum Region {
-    Lumen = 0,
-    Intima = 1,
-    Media = 2,
-    Adventitia = 3,
-    /// Fluid of an artificial flow extension beyond a vessel end (see [`crate::extensions`]): no
-    /// wall grows around it.
-    Extension = 4,
-}
-
-impl Region {
-    /// The vessel's own regions (a flow extension is not one of them).
-    pub const ALL: [Region; 4] = [Region::Lumen, Region::Intima, Region::Media, Region::Adventitia];
-    pub const WALL: [Region; 3] = [Region::Intima, Region::Media, Region::Adventitia];
-    pub fn name(self) -> &'static str {
-        match self {
-            Region::Lumen => "lumen",
-            Region::Intima => "intima",
-            Region::Media => "media",
-            Region::Adventitia => "adventitia",
-            Region::Extension => "extension",
-        }
-    }
-    /// The integer written to the `region` cell array.
-    pub fn code(self) -> i32 {
-        self as i32
-    }
-    pub fn is_wall(self) -> bool {
-        matches!(self, Region::Intima | Region::Media | Region::Adventitia)
-    }
-}
-
 /// One face of one element: `element` is a 0-based element index, `face` a canonical face index.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
 pub struct ElementFace {
@@ -157,25 +119,13 @@ pub struct Triad {
     pub e_rad: Vector3<f64>,
 }
 
-/// Per-element quality figures (definitions in [`crate::quality`]).
+/// Per-element quality figures (definitions in [`crate::geometry::quality`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Default)]
 pub struct ElementQuality {
     pub scaled_jacobian: f64,
     pub equiangle_skew: f64,
-    /// The smallest face pyramid over a sixth of the volume ([`crate::quality::face_pyramid_ratio`]).
+    /// The smallest face pyramid over a sixth of the volume ([`crate::geometry::quality::face_pyramid_ratio`]).
     pub face_pyramid: f64,
-}
-
-/// A wall layer as the writers need it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct WallLayer {
-    pub region: Region,
-    /// Fraction of the wall thickness.
-    pub thickness_fraction: f64,
-    /// Elements across the layer.
-    pub radial_elements: usize,
-    /// Collagen fibre angle beta from the circumferential direction, degrees.
-    pub fibre_angle_deg: f64,
 }
 
 /// A vessel end: where flow enters or leaves.
@@ -189,7 +139,7 @@ pub struct VesselEnd {
     /// Centre of the end section and its unit normal pointing out of the vessel.
     pub centre: Point3<f64>,
     pub outward_normal: Vector3<f64>,
-    /// Whether the end opens in the side of the mesh (see [`crate::side_ends`]): its lumen
+    /// Whether the end opens in the side of the mesh (see [`crate::stages::additions::side_ends`]): its lumen
     /// faces are a patch of the lumen surface on the vessel's cap, not a cross-section, so no
     /// flow extension is swept from it.
     pub side: bool,
@@ -239,7 +189,7 @@ pub struct VesselMesh {
     /// Branch index of each element (0 for an unbranched vessel).
     pub branch_of: Vec<u32>,
     /// Whether each element lies in a saccular aneurysm's sac: a sac meshed as a blind branch
-    /// (see [`is_sac`]), or the part of a junction that a sac holds (see [`crate::sacs`]).
+    /// (see [`is_sac`]), or the part of a junction that a sac holds (see [`crate::stages::annotation::sacs`]).
     pub sac: Vec<bool>,
     /// Per element local frame (lumen elements too: radial from the centerline side to the wall).
     pub triads: Vec<Triad>,

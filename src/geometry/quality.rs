@@ -12,7 +12,7 @@
 //!   max((theta_max - 90) / 90, (90 - theta_min) / 90). 0 for a cube, 1 for a degenerate element;
 //!   CFD practice asks for a mean below 0.4.
 
-/// The quality bars a mesh is promised to meet (checked in [`crate::report::Bars`]): worst
+/// The quality bars a mesh is promised to meet (checked in [`crate::pipeline::report::Bars`]): worst
 /// scaled Jacobian, wall mean scaled Jacobian, lumen mean equi-angle skew, and every face
 /// pyramid positive. FEA practice wants a wall mean above 0.8 and CFD a lumen skew below 0.4;
 /// these are vesselhex's own, tighter. The pyramids are OpenFOAM's: checkMesh fails a mesh with
@@ -27,7 +27,7 @@ impl Bars {
     pub const MIN_FACE_PYRAMID: f64 = 0.0;
 }
 
-use crate::mesh::{ElementQuality, HEX_CORNER_NEIGHBOURS, HEX_FACES};
+use crate::geometry::mesh::{ElementQuality, HEX_CORNER_NEIGHBOURS, HEX_FACES};
 use nalgebra::{Point3, Vector3};
 
 /// A corner whose shortest edge is at most this share of its longest counts as collapsed (scaled
@@ -130,7 +130,7 @@ pub fn face_pyramids_of_positive_volume(c: &[Point3<f64>; 8]) -> Option<[f64; 6]
 /// over the face's reach in that direction (at least 0.4 of the centre's distance to the face).
 /// checkMesh fails a face above 4. A face between two cells is judged by both cells' centres
 /// instead, so a face fine inside a mesh may fail once it is a boundary (an opening's rim, see
-/// [`crate::side_ends`]). Infinite for a cell without positive volume.
+/// [`crate::stages::additions::side_ends`]). Infinite for a cell without positive volume.
 pub fn boundary_face_skewness(c: &[Point3<f64>; 8], f: usize) -> f64 {
     let Some(cell) = OpenFoamCell::of(c) else { return f64::INFINITY };
     let (centre, area) = (cell.centres[f], cell.areas[f]);
@@ -160,7 +160,7 @@ impl OpenFoamCell {
         for (f, face) in HEX_FACES.iter().enumerate() {
             let p = face.map(|i| c[i]);
             centres[f] = polygon_centre(&p.map(|q| q.coords));
-            areas[f] = crate::mesh::quad_area_vector(p);
+            areas[f] = crate::geometry::mesh::quad_area_vector(p);
         }
         let estimate = (centres[0] + centres[1] + centres[2] + centres[3] + centres[4] + centres[5]) / 6.0;
         // Three times each pyramid's volume from the estimate, and their centroids: the cell centre.
@@ -286,11 +286,11 @@ pub(crate) mod tests {
     #[test]
     fn boundary_skewness_of_a_sheared_cube_is_its_shear() {
         for t in [0.0, 0.5, 2.0, 5.0] {
-            let mut c = crate::mesh::unit_cube();
+            let mut c = crate::geometry::mesh::unit_cube();
             for p in &mut c[4..] {
                 p.x += t;
             }
-            let s = boundary_face_skewness(&c, crate::mesh::FACE_UPSTREAM);
+            let s = boundary_face_skewness(&c, crate::geometry::mesh::FACE_UPSTREAM);
             assert!((s - t).abs() < 1e-12, "shear {t}: skewness {s}");
         }
     }
@@ -322,12 +322,12 @@ pub(crate) mod tests {
         };
         for scale in [1e-3, 0.1, 0.4, 2.0] {
             for _ in 0..50_000 {
-                let mut c = crate::mesh::unit_cube();
+                let mut c = crate::geometry::mesh::unit_cube();
                 c.iter_mut().for_each(|p| *p += nalgebra::Vector3::new(jitter(), jitter(), jitter()) * scale);
                 assert_eq!(equiangle_skew(&c).to_bits(), skew_of_every_angle(&c).to_bits(), "{c:?}");
             }
         }
-        let mut c = crate::mesh::unit_cube();
+        let mut c = crate::geometry::mesh::unit_cube();
         c[1] = c[0]; // a degenerate corner
         assert_eq!(equiangle_skew(&c).to_bits(), skew_of_every_angle(&c).to_bits());
     }
@@ -352,7 +352,7 @@ pub(crate) mod tests {
         let slab = warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]);
         assert!(scaled_jacobian(&slab) > 0.9, "{}", scaled_jacobian(&slab));
         let pyramids = face_pyramids(&slab);
-        assert!(pyramids[crate::mesh::FACE_DOWNSTREAM] < -1.0, "{pyramids:?}");
+        assert!(pyramids[crate::geometry::mesh::FACE_DOWNSTREAM] < -1.0, "{pyramids:?}");
         assert!(face_pyramid_ratio(&slab) < 0.0);
         assert!(validity(&slab) < 0.0, "a negative pyramid counts as an inverted element");
         // As thick everywhere as over that corner, the same warp is harmless.
@@ -362,7 +362,7 @@ pub(crate) mod tests {
 
     #[test]
     fn a_parallelepiped_has_six_equal_pyramids() {
-        let mut c = crate::mesh::unit_cube();
+        let mut c = crate::geometry::mesh::unit_cube();
         for p in c[4..].iter_mut() {
             *p += nalgebra::Vector3::new(0.7, -0.3, 0.0);
         }
@@ -372,14 +372,14 @@ pub(crate) mod tests {
         for r in face_pyramids(&c) {
             assert!((r - 1.0).abs() < 1e-9, "{:?}", face_pyramids(&c));
         }
-        let mut m = crate::mesh::unit_cube();
+        let mut m = crate::geometry::mesh::unit_cube();
         m.iter_mut().for_each(|p| p.z = -p.z);
         assert_eq!(face_pyramids(&m), [-1.0; 6], "an inverted cell");
     }
 
     #[test]
     fn cube_is_perfect_and_scaling_does_not_matter() {
-        let mut c = crate::mesh::unit_cube();
+        let mut c = crate::geometry::mesh::unit_cube();
         assert!((scaled_jacobian(&c) - 1.0).abs() < 1e-12);
         assert!(equiangle_skew(&c).abs() < 1e-12);
         for p in c.iter_mut() {
@@ -392,7 +392,7 @@ pub(crate) mod tests {
 
     #[test]
     fn sheared_and_inverted_elements() {
-        let mut c = crate::mesh::unit_cube();
+        let mut c = crate::geometry::mesh::unit_cube();
         // shear the top by 45 degrees in x: corner angles 45/135
         for p in c[4..].iter_mut() {
             p.x += 1.0;
@@ -401,7 +401,7 @@ pub(crate) mod tests {
         assert!((sj - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12, "{sj}");
         assert!((equiangle_skew(&c) - 0.5).abs() < 1e-12);
         // mirror: inverted
-        let mut m = crate::mesh::unit_cube();
+        let mut m = crate::geometry::mesh::unit_cube();
         for p in m.iter_mut() {
             p.z = -p.z;
         }
@@ -413,12 +413,12 @@ pub(crate) mod tests {
     /// the element is degenerate, while a thin slab (1e-4 of its length) stays perfect.
     #[test]
     fn a_collapsed_edge_makes_a_degenerate_element() {
-        let mut c = crate::mesh::unit_cube();
+        let mut c = crate::geometry::mesh::unit_cube();
         for i in [4, 5] {
             c[i].z = 1e-9;
         }
         assert_eq!(scaled_jacobian(&c), 0.0);
-        let mut slab = crate::mesh::unit_cube();
+        let mut slab = crate::geometry::mesh::unit_cube();
         for p in slab[4..].iter_mut() {
             p.z = 1e-4;
         }

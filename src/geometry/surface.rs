@@ -1,16 +1,29 @@
-//! Geometric queries on the lumen surface: first ray hit and exact closest point, both through
-//! parry's bounding-volume hierarchy in double precision.
+//! The lumen surface: its triangles as read ([`TriangleSurface`]) and the geometric queries on
+//! them ([`LumenSurface`]): first ray hit and exact closest point, both through parry's
+//! bounding-volume hierarchy in double precision.
 //!
 //! The meshing algorithms only see [`LumenSurface`]; parry's types stay in this file.
 
-use crate::error::{Error, Result};
-use crate::input::TriangleSurface;
+use crate::data::error::{Error, Result};
+use crate::geometry::vector::any_perpendicular;
 use nalgebra::{Point3, Vector3};
 use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::PointQuery;
 use parry3d_f64::query::Ray;
 use parry3d_f64::shape::{CompositeShapeRef, TriMesh, TriMeshFlags};
 use std::path::PathBuf;
+
+/// A triangulated lumen surface, lengths in millimetres.
+#[derive(Debug, Clone)]
+pub struct TriangleSurface {
+    pub vertices: Vec<Point3<f64>>,
+    /// Triangles as 0-based vertex indices (polygons with more than three points are fanned).
+    pub triangles: Vec<[u32; 3]>,
+    /// Per-triangle integer tag when the file carries one (e.g. SimVascular's `ModelFaceID`).
+    pub triangle_tags: Option<(String, Vec<i64>)>,
+    /// The file it came from (for messages).
+    pub source: PathBuf,
+}
 
 /// Where a ray meets the surface.
 #[derive(Debug, Clone, Copy)]
@@ -82,7 +95,7 @@ impl LumenSurface {
     /// from origins shifted sideways by a nanometre-scale amount, far below any real hole.
     pub fn first_hit(&self, origin: &Point3<f64>, dir: &Vector3<f64>, max_distance: f64) -> Option<RayHit> {
         self.cast(origin, dir, max_distance).or_else(|| {
-            let u = crate::centerline::any_perpendicular(dir);
+            let u = any_perpendicular(dir);
             let v = dir.cross(&u);
             let eps = 1e-9 * max_distance.max(1.0);
             [u, v, -u, -v].iter().find_map(|side| self.cast(&(origin + side * eps), dir, max_distance))

@@ -15,7 +15,7 @@
 //! - Interruption: SIGINT, SIGTERM and SIGHUP remove what the run created (staging folder,
 //!   partial files, an output folder it created) and exit with 128 + the signal number.
 
-use crate::error::{Error, Result};
+use crate::data::error::{Error, Result};
 use std::ffi::OsString;
 use std::fs::File;
 use std::path::{Component, Path, PathBuf};

@@ -1,4 +1,4 @@
-//! The sink of [`super::write_atomic`]: a buffer that goes to the file whole, past the page
+//! The sink of [`crate::io::atomic::write_atomic`]: a buffer that goes to the file whole, past the page
 //! cache (`O_DIRECT`) where the system allows it.
 //!
 //! # Why past the page cache
@@ -51,7 +51,7 @@ impl<'f> Sink<'f> {
 
     /// Writes the `n` first bytes of the buffer (a multiple of [`ALIGN`] while direct).
     fn write_out(&mut self, n: usize) -> io::Result<()> {
-        crate::output::check_interrupted()?;
+        crate::io::output::check_interrupted()?;
         let mut at = 0;
         while at < n {
             let data = &self.bytes[self.start + at..self.start + n];

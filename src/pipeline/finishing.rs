@@ -1,22 +1,22 @@
 //! The stages after the volume that De Santis et al. 2011 describe and a default run does not
-//! take: refinement before or after projection ([`crate::refinement`]), walls from segmented
-//! surfaces ([`crate::wall_surfaces`]) and flow extensions ([`crate::extensions`]), in that order
+//! take: refinement before or after projection ([`crate::stages::additions::refinement`]), walls from segmented
+//! surfaces ([`crate::stages::additions::wall_surfaces`]) and flow extensions ([`crate::stages::additions::extensions`]), in that order
 //! (the extensions are swept from the finished vessel, whose labels they keep). Each runs only
 //! when its settings ask for it: the default mesh is the volume stage's, untouched. Before the
 //! extensions, the ends of branches too short to mesh are opened in the side of the mesh when
-//! the pipeline asks ([`crate::side_ends`]).
+//! the pipeline asks ([`crate::stages::additions::side_ends`]).
 
-use crate::config::MeshConfig;
-use crate::error::Result;
-use crate::extensions::ExtensionReport;
-use crate::input::{ReadLimits, TriangleSurface};
-use crate::mesh::VesselMesh;
-use crate::meshed::Meshed;
-use crate::progress::Progress;
-use crate::refinement::{Placement, RefinementReport};
-use crate::side_ends::{open_side_end, SideEndReport, SideOpening};
-use crate::surface::LumenSurface;
-use crate::wall_surfaces::{WallSurface, WallSurfacesReport};
+use crate::data::config::MeshConfig;
+use crate::data::error::Result;
+use crate::stages::additions::extensions::ExtensionReport;
+use crate::io::input::{ReadLimits, TriangleSurface};
+use crate::geometry::mesh::VesselMesh;
+use crate::stages::annotation::meshed::Meshed;
+use crate::pipeline::progress::Progress;
+use crate::stages::additions::refinement::{Placement, RefinementReport};
+use crate::stages::additions::side_ends::{open_side_end, SideEndReport, SideOpening};
+use crate::geometry::surface::LumenSurface;
+use crate::stages::additions::wall_surfaces::{WallSurface, WallSurfacesReport};
 use serde::Serialize;
 use std::borrow::Cow;
 
@@ -94,7 +94,7 @@ pub fn finish(
     additions.side_ends = side_ends.iter().filter_map(|o| open_side_end(meshed, o)).collect();
     if config.extensions.is_on() {
         progress.stage("flow extensions");
-        let reports = crate::extensions::extend(&mut meshed.mesh, &config.extensions)?;
+        let reports = crate::stages::additions::extensions::extend(&mut meshed.mesh, &config.extensions)?;
         meshed.junction_of.resize(meshed.mesh.hexes.len(), None);
         additions.extensions = Some(reports);
     }
@@ -105,7 +105,7 @@ pub fn finish(
 /// `wall.surface`), which the command line may give after the case file is read.
 pub fn check_wall_surfaces(config: &MeshConfig) -> Result<()> {
     if !config.wall.surfaces.is_empty() && config.wall.surface.is_none() {
-        return Err(crate::error::Error::Config(
+        return Err(crate::data::error::Error::Config(
             "wall.surfaces: the layers' surfaces need the outer wall's too: give --wall-surface or wall.surface".into(),
         ));
     }
@@ -119,7 +119,7 @@ fn refine_stage(meshed: &mut Meshed, lumen: &LumenSurface, config: &MeshConfig) 
     let coarse_elements = meshed.mesh.hexes.len();
     let mut radial_cells = config.lumen.radial_elements;
     // Projected: the coarse mesh's surface nodes, or the mesh's after refinement before projection.
-    let mut projected = crate::refinement::surface_nodes(&meshed.mesh);
+    let mut projected = crate::stages::additions::refinement::surface_nodes(&meshed.mesh);
     for (k, placement) in
         [(r.before_projection, Placement::BeforeProjection(lumen)), (r.after_projection, Placement::AfterProjection)]
     {
@@ -127,17 +127,17 @@ fn refine_stage(meshed: &mut Meshed, lumen: &LumenSurface, config: &MeshConfig) 
             refine_meshed(meshed, k, placement, radial_cells)?;
             radial_cells *= k;
             if matches!(placement, Placement::BeforeProjection(_)) {
-                projected = crate::refinement::surface_nodes(&meshed.mesh);
+                projected = crate::stages::additions::refinement::surface_nodes(&meshed.mesh);
             }
         }
     }
-    meshed.accuracy = crate::accuracy::surface_accuracy(&meshed.mesh, lumen, &meshed.tree.branches, &meshed.projected)?;
+    meshed.accuracy = crate::stages::annotation::accuracy::surface_accuracy(&meshed.mesh, lumen, &meshed.tree.branches, &meshed.projected)?;
     Ok(RefinementReport {
         before_projection: r.before_projection,
         after_projection: r.after_projection,
         coarse_elements,
         elements: meshed.mesh.hexes.len(),
-        surface_nodes: crate::refinement::surface_nodes(&meshed.mesh),
+        surface_nodes: crate::stages::additions::refinement::surface_nodes(&meshed.mesh),
         projected_points: projected,
     })
 }
@@ -152,19 +152,19 @@ fn wall_stage(
 ) -> Result<WallSurfacesReport> {
     // A point of the lumen, which every wall surface must enclose.
     let lumen_elements = meshed.mesh.lumen_range();
-    let inside = crate::mesh::element_centre(&meshed.mesh.corners(lumen_elements.start + lumen_elements.len() / 2));
+    let inside = crate::geometry::mesh::element_centre(&meshed.mesh.corners(lumen_elements.start + lumen_elements.len() / 2));
     let read = |path: &std::path::Path| -> Result<WallSurface> {
-        let (s, _) = crate::input::read_surface_within(path, config.units, limits)?;
+        let (s, _) = crate::io::input::read_surface_within(path, config.units, limits)?;
         WallSurface::new(LumenSurface::new(&s)?, &inside)
     };
     let layers = config.wall.surfaces.iter().map(|p| read(p)).collect::<Result<Vec<_>>>()?;
     let outer = read(outer)?;
-    crate::wall_surfaces::place(&mut meshed.mesh, lumen, &layers, &outer)
+    crate::stages::additions::wall_surfaces::place(&mut meshed.mesh, lumen, &layers, &outer)
 }
 
 /// Refines the mesh of `meshed` (its junction of each element follows).
 fn refine_meshed(meshed: &mut Meshed, k: usize, placement: Placement, radial_cells: usize) -> Result<()> {
-    meshed.mesh = crate::refinement::refine(&meshed.mesh, k, placement, radial_cells)?;
+    meshed.mesh = crate::stages::additions::refinement::refine(&meshed.mesh, k, placement, radial_cells)?;
     let cubes = k * k * k;
     meshed.junction_of = meshed.junction_of.iter().flat_map(|j| std::iter::repeat_n(*j, cubes)).collect();
     Ok(())
@@ -181,7 +181,7 @@ pub fn mesh_for_format<'a>(mesh: &'a VesselMesh, format: &str, config: &MeshConf
         _ => false,
     };
     if vessel_alone {
-        crate::extensions::without_extensions(mesh)
+        crate::stages::additions::extensions::without_extensions(mesh)
     } else {
         Cow::Borrowed(mesh)
     }
@@ -189,7 +189,7 @@ pub fn mesh_for_format<'a>(mesh: &'a VesselMesh, format: &str, config: &MeshConf
 
 /// A refined mesh holds k^3 times the elements and nodes, and the coarse one is held while the
 /// refined one is built.
-pub fn scale_estimate(estimate: &mut crate::resources::MeshEstimate, config: &MeshConfig) {
+pub fn scale_estimate(estimate: &mut crate::pipeline::estimate::MeshEstimate, config: &MeshConfig) {
     let k = (config.refinement.before_projection * config.refinement.after_projection) as f64;
     if k > 1.0 {
         let cubes = k * k * k;

@@ -1,11 +1,21 @@
 //! `report.json`: element counts, quality per region, surface fidelity and timings.
 
-use crate::accuracy::SurfaceAccuracy;
-use crate::mesh::{Region, VesselMesh};
-use crate::quality::{Bars, Stats};
-use crate::units::LengthUnit;
+pub use crate::data::diagnostics::Warning;
+use crate::data::config::{MeshConfig, WallGrowth};
+use crate::data::units::LengthUnit;
+use crate::geometry::mesh::{Region, VesselMesh};
+use crate::geometry::quality::{Bars, Stats};
+use crate::geometry::surface::TriangleSurface;
+use crate::io::input::HygieneReport;
+use crate::pipeline::ends::{end_reports, ends_cut_short, ends_left_out, ends_not_meshed};
+use crate::pipeline::MeshedVessel;
+use crate::stages::annotation::accuracy::SurfaceAccuracy;
+use crate::stages::annotation::end_names::mesh_ends_at;
+use crate::stages::annotation::Meshed;
+use crate::stages::volume::JunctionWall;
 use indexmap::IndexMap;
 use serde::Serialize;
+use std::path::Path;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct RegionReport {
@@ -13,7 +23,7 @@ pub struct RegionReport {
     pub nodes: usize,
     pub scaled_jacobian: Stats,
     pub equiangle_skew: Stats,
-    /// OpenFOAM's face pyramids ([`crate::quality::face_pyramid_ratio`]): checkMesh fails a mesh
+    /// OpenFOAM's face pyramids ([`crate::geometry::quality::face_pyramid_ratio`]): checkMesh fails a mesh
     /// whose minimum is not positive.
     pub face_pyramid: Stats,
 }
@@ -68,7 +78,7 @@ pub struct JunctionReport {
     pub spine_axis: Option<[f64; 3]>,
     /// How the wall grew from the junction's lumen-surface nodes: `smoothed_normal`, `normal`
     /// or `ray` (the best of them, see docs/guide/junctions.md).
-    pub wall_growth: crate::volume::JunctionWall,
+    pub wall_growth: crate::stages::volume::JunctionWall,
     /// Whether the transitions' lumen-surface nodes were slid on the triangles to raise the
     /// worst element (see docs/guide/junctions.md).
     pub surface_nodes_slid: bool,
@@ -117,7 +127,7 @@ pub struct InputReport {
     /// +1: the surface triangles face out of the lumen; -1: into it.
     pub surface_orientation: &'static str,
     /// What surface hygiene changed before meshing.
-    pub hygiene: crate::input::HygieneReport,
+    pub hygiene: crate::io::input::HygieneReport,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -135,7 +145,7 @@ pub struct Report {
     pub ends: Vec<EndReport>,
     /// Refinement, segmented walls and flow extensions, when asked for (nothing otherwise).
     #[serde(flatten)]
-    pub additions: crate::finishing::Additions,
+    pub additions: crate::pipeline::finishing::Additions,
     pub branches: Vec<BranchReport>,
     pub junctions: Vec<JunctionReport>,
     /// Whether the mesh meets every quality bar ([`Bars`]); when not, `warnings` names the bar
@@ -147,22 +157,7 @@ pub struct Report {
     /// Seconds per stage (zeros with `--reproducible`, so the report is byte-identical).
     pub timings_s: IndexMap<String, f64>,
     pub outputs: Vec<String>,
-    pub config: crate::config::MeshConfig,
-}
-
-/// A note on a result that was still written (see [`Report::warnings`]).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Warning {
-    /// What kind of note, stable for scripts: `quality_bar`, `surface_repaired`, `units`, ...
-    pub kind: &'static str,
-    /// One line naming the figure, the place and, where there is one, the fix.
-    pub message: String,
-}
-
-impl Warning {
-    pub fn new(kind: &'static str, message: impl Into<String>) -> Warning {
-        Warning { kind, message: message.into() }
-    }
+    pub config: crate::data::config::MeshConfig,
 }
 
 /// One warning per quality bar ([`Bars`]) the mesh misses, naming the figure and, for the
@@ -179,7 +174,7 @@ pub fn bar_warnings(mesh: &VesselMesh) -> Vec<Warning> {
         .filter(|(_, q)| q.scaled_jacobian < Bars::MIN_SCALED_JACOBIAN)
     {
         let below = mesh.quality.iter().filter(|q| q.scaled_jacobian < Bars::MIN_SCALED_JACOBIAN).count();
-        let c = crate::mesh::element_centre(&mesh.corners(e));
+        let c = crate::geometry::mesh::element_centre(&mesh.corners(e));
         out.push(Warning::new(
             "quality_bar",
             format!(
@@ -230,7 +225,7 @@ fn pyramid_warning(mesh: &VesselMesh) -> Option<Warning> {
     }
     let below =
         mesh.quality.iter().filter(|q| q.face_pyramid.is_nan() || q.face_pyramid <= Bars::MIN_FACE_PYRAMID).count();
-    let c = crate::mesh::element_centre(&mesh.corners(e));
+    let c = crate::geometry::mesh::element_centre(&mesh.corners(e));
     Some(Warning::new(
         "quality_bar",
         format!(
@@ -284,4 +279,136 @@ pub fn wall_report(mesh: &VesselMesh) -> WallReport {
 /// Quality of a region, for callers that need one figure.
 pub fn region_quality(mesh: &VesselMesh, region: Region) -> Stats {
     Stats::of(mesh.quality[mesh.region_range(region)].iter().map(|q| q.scaled_jacobian))
+}
+
+fn end_kind(end: &crate::stages::projection::BranchEnd) -> &'static str {
+    match end {
+        crate::stages::projection::BranchEnd::Vessel { closed: true } => "closed",
+        crate::stages::projection::BranchEnd::Vessel { closed: false } => "open",
+        crate::stages::projection::BranchEnd::Fold(_) => "junction",
+        crate::stages::projection::BranchEnd::Dome => "dome",
+    }
+}
+
+fn build_report(
+    meshed: &Meshed,
+    surface: &TriangleSurface,
+    centerline_path: &Path,
+    config: &MeshConfig,
+    timings: &[(String, f64)],
+    mut warnings: Vec<Warning>,
+) -> Report {
+    let mesh = &meshed.mesh;
+    let unit = config.output_units;
+    let scale = unit.from_mm();
+    let branches = meshed
+        .tree
+        .branches
+        .iter()
+        .zip(&meshed.projected)
+        .map(|(b, p)| BranchReport {
+            name: b.name.clone(),
+            centerline_length: b.length() * scale,
+            meshed_from: p.s_start * scale,
+            meshed_to: p.s_end * scale,
+            stations: p.sections.len(),
+            circumferential_elements: meshed.templates[p.branch].ring_len(),
+            inlet_end: end_kind(&p.start),
+            outlet_end: end_kind(&p.end),
+            elements: mesh.branch_of.iter().filter(|&&x| x as usize == p.branch).count(),
+            scaled_jacobian: Stats::of(
+                (0..mesh.hexes.len())
+                    .filter(|&e| mesh.branch_of[e] as usize == p.branch)
+                    .map(|e| mesh.quality[e].scaled_jacobian),
+            ),
+        })
+        .collect();
+    let junctions = meshed
+        .junctions
+        .iter()
+        .map(|g| {
+            let elements: Vec<usize> =
+                (0..mesh.hexes.len()).filter(|&e| meshed.junction_of[e] == Some(g.index)).collect();
+            JunctionReport {
+                centre: (g.centre.coords * scale).into(),
+                radius: g.radius * scale,
+                branches: g.slots.iter().map(|s| meshed.tree.branches[s.branch].name.clone()).collect(),
+                arrangement: g.arrangement_name(),
+                spine_axis: g.spine_axis().map(Into::into),
+                wall_growth: match config.wall.growth {
+                    WallGrowth::Ray => JunctionWall::Ray,
+                    WallGrowth::Normal => meshed.junction_variant.wall,
+                },
+                surface_nodes_slid: meshed.junction_variant.optimisation.slide_surface_nodes,
+                pattern_search: meshed.junction_variant.optimisation.pattern_search,
+                pages_moved: meshed.junction_variant.optimisation.move_pages,
+                surface_smoothed: meshed.junction_variant.optimisation.smooth_surface,
+                elements: elements.len(),
+                // A sac branch's transition is the junction's too, but the sac is the branch's.
+                sac_elements: if crate::stages::annotation::sacs::holds_sac(g) {
+                    elements.iter().filter(|&&e| mesh.sac[e]).count()
+                } else {
+                    0
+                },
+                scaled_jacobian: Stats::of(elements.iter().map(|&e| mesh.quality[e].scaled_jacobian)),
+                lumen_equiangle_skew: Stats::of(
+                    elements.iter().filter(|&&e| !mesh.regions[e].is_wall()).map(|&e| mesh.quality[e].equiangle_skew),
+                ),
+            }
+        })
+        .collect();
+    let normals_outward = meshed.projected.first().is_none_or(|p| p.normals_outward);
+    let bars = bar_warnings(mesh);
+    let within_bars = bars.is_empty();
+    warnings.extend(bars);
+    warnings.extend(meshed.accuracy.unmeshed_warning().map(|w| Warning::new("surface_not_meshed", w)));
+    Report {
+        vesselhex_version: env!("CARGO_PKG_VERSION"),
+        length_unit: unit,
+        length_unit_in_m: unit.in_metres(),
+        input: InputReport {
+            surface: surface.source.display().to_string(),
+            centerlines: centerline_path.display().to_string(),
+            units: config.units,
+            surface_triangles: surface.triangles.len(),
+            surface_orientation: if normals_outward { "outward" } else { "inward" },
+            hygiene: HygieneReport::default(),
+        },
+        elements: mesh.hexes.len(),
+        nodes: mesh.nodes.len(),
+        lumen: lumen_report(mesh),
+        wall: wall_report(mesh),
+        surface_accuracy: meshed.accuracy.clone(),
+        ends: vec![],
+        additions: Default::default(),
+        branches,
+        junctions,
+        within_bars,
+        warnings,
+        timings_s: timings.iter().cloned().collect(),
+        outputs: vec![],
+        config: config.clone(),
+    }
+}
+
+/// The report of a meshed vessel as `write_vessel` would write it with `config`, without
+/// writing anything (no outputs listed); timings as given.
+pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(String, f64)]) -> Report {
+    let mut warnings = vessel.settings.warnings.clone();
+    let side_ends: Vec<[f64; 3]> = vessel.additions.side_ends.iter().map(|s| s.centre).collect();
+    let mut ends =
+        end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, &side_ends, config.output_units.from_mm());
+    let mesh = &vessel.meshed.mesh;
+    for ((report, at), given) in ends.iter_mut().zip(mesh_ends_at(mesh, &vessel.ends)).zip(&vessel.end_names) {
+        report.name = at.map(|m| mesh.ends[m].name.clone()).or_else(|| given.clone());
+    }
+    let left_out = ends_left_out(&vessel.ends, &vessel.left_out_mm);
+    warnings.extend(ends_not_meshed(&ends, &left_out, config.output_units));
+    warnings.extend(ends_cut_short(&vessel.meshed, config));
+    let mut report =
+        build_report(&vessel.meshed, &vessel.surface, &vessel.centerline_source, config, timings, warnings);
+    report.ends = ends;
+    report.input.hygiene = vessel.hygiene.clone();
+    report.additions = vessel.additions.clone().scaled(config.output_units.from_mm());
+    report
 }

@@ -260,7 +260,7 @@ fn plane_quadric(u: &Vector3<f64>, p: &Point3<f64>) -> Matrix4<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::input::topology::{boundary_loops, triangle_neighbours, NON_MANIFOLD};
+    use crate::io::input::topology::{boundary_loops, triangle_neighbours, NON_MANIFOLD};
 
     #[test]
     fn a_fine_tube_decimated_keeps_its_shape_its_ends_and_its_winding() {

@@ -6,10 +6,10 @@
 //! Everything random is seeded by the case's and the mutation's names, so a run repeats.
 
 use super::decimate::decimate;
-use crate::centerline_extract::{extract_centerlines, find_caps, EndKind, ExtractOptions, Extraction};
-use crate::input::topology::{boundary_loops, loop_centre_and_area, orient_consistently, triangle_neighbours};
-use crate::input::{clean_surface, read_surface, weld, TriangleSurface};
-use crate::units::LengthUnit;
+use crate::stages::centerline::extract::{extract_centerlines, find_caps, EndKind, ExtractOptions, Extraction};
+use crate::io::input::topology::{boundary_loops, loop_centre_and_area, orient_consistently, triangle_neighbours};
+use crate::io::input::{clean_surface, read_surface, weld, TriangleSurface};
+use crate::data::units::LengthUnit;
 use crate::writers::write_atomic;
 use nalgebra::{Point3, Rotation3, UnitQuaternion, Vector3, Vector4};
 use std::path::{Path, PathBuf};
@@ -309,7 +309,7 @@ impl Base {
         let s = &self.surface;
         let mut oriented = s.triangles.clone();
         orient_consistently(&mut oriented);
-        let normals = crate::input::topology::vertex_normals(&s.vertices, &oriented);
+        let normals = crate::io::input::topology::vertex_normals(&s.vertices, &oriented);
         let mut on_cap = vec![false; s.vertices.len()];
         for c in &self.caps {
             c.triangles.iter().flat_map(|&t| s.triangles[t as usize]).for_each(|v| on_cap[v as usize] = true);

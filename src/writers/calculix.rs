@@ -11,8 +11,8 @@
 
 use super::inp::{write_inp, Dialect};
 use super::WriteOptions;
-use crate::error::Result;
-use crate::mesh::VesselMesh;
+use crate::data::error::Result;
+use crate::geometry::mesh::VesselMesh;
 use std::path::{Path, PathBuf};
 
 /// Writes `calculix/model.inp` under `dir`.

@@ -20,7 +20,7 @@
 //!   inflow; every outlet end gets its own pressure and backflow surface.
 //!
 //! Wall materials: the shared per-layer constants of `[material]`
-//! ([`WallMaterial`](super::material::WallMaterial), the same as the .inp decks'), the fibre angle
+//! ([`WallMaterial`](crate::data::config::material::WallMaterial), the same as the .inp decks'), the fibre angle
 //! `gamma` from the mesh's layers.
 //!
 //! Both decks follow the reader rules of `FORMATS.md` 2b and the structure of the two decks FEBio
@@ -31,7 +31,7 @@
 //! node's position in `<Nodes>`, not by its id (FEBio 4.11 runs, `tests/febio_run.rs`): in
 //! `wall.feb` the two differ, and the deck says so; `fsi.feb` writes every node in id order, so
 //! there they agree. Facets are the mesh's face sets wound with
-//! [`HEX_FACES`](crate::mesh::HEX_FACES), outward from the element they belong to: the wall's lumen
+//! [`HEX_FACES`](crate::geometry::mesh::HEX_FACES), outward from the element they belong to: the wall's lumen
 //! facets point into the lumen, so a positive pressure inflates the wall.
 //!
 //! Material blocks and the `<Control>` sections come from `templates/febio/*.xml` (compiled in),
@@ -41,13 +41,13 @@
 //! length = the output unit, time s, force N, hence mm -> tonne and MPa, m -> kg and Pa.
 
 use super::inp::MidEdges;
-use super::material::WallMaterial;
 use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
-use crate::error::{Error, Result};
-use crate::mesh::{face_nodes, sets, ElementFace, Region, VesselMesh};
-use crate::units::MechanicalUnits;
-use serde::{Deserialize, Serialize};
+pub use crate::data::config::febio::{BloodConstants, FebioConfig, FebioElement, FsiControl};
+use crate::data::config::material::WallMaterial;
+use crate::data::error::{Error, Result};
+use crate::geometry::mesh::{face_nodes, sets, ElementFace, Region, VesselMesh};
+use crate::data::units::MechanicalUnits;
 use std::fmt::Write as _;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -66,148 +66,6 @@ const TEMPLATE_CONTROL_FSI: (&str, &str) = ("control_fsi.xml", include_str!("../
 
 /// One mmHg in Pa.
 const MMHG_PA: f64 = 133.322387415;
-
-// ------------------------------------------------------------------------------------------------
-// Configuration
-// ------------------------------------------------------------------------------------------------
-
-/// Element type of the FEBio wall deck.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum FebioElement {
-    /// Trilinear brick.
-    #[default]
-    Hex8,
-    /// 20-node serendipity brick: the corners and one node per edge midpoint, the mid-edge nodes
-    /// and their labels shared with the CalculiX/Abaqus C3D20 decks ([`MidEdges`]); surfaces are
-    /// `quad8` facets. `wall.feb` only: `fsi.feb` refuses it.
-    Hex20,
-}
-
-impl FebioElement {
-    pub fn name(self) -> &'static str {
-        match self {
-            FebioElement::Hex8 => "hex8",
-            FebioElement::Hex20 => "hex20",
-        }
-    }
-    /// The facet tag of the element's faces.
-    pub fn facet(self) -> &'static str {
-        match self {
-            FebioElement::Hex8 => "quad4",
-            FebioElement::Hex20 => "quad8",
-        }
-    }
-}
-
-/// Blood as FEBio's `fluid-FSI` material.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct BloodConstants {
-    /// kg/m^3.
-    pub density_kg_m3: f64,
-    /// Bulk modulus of the (slightly compressible) fluid, Pa.
-    pub bulk_modulus_pa: f64,
-    /// Newtonian dynamic viscosity, Pa s.
-    pub viscosity_pa_s: f64,
-}
-
-impl Default for BloodConstants {
-    /// Density 1060 kg/m^3 and viscosity 3.5 mPa s (the usual Newtonian blood of large-artery
-    /// CFD); bulk modulus 2.2 GPa (water), as in FEBio's fluid-FSI verification problems
-    /// (`FORMATS.md` 2b: 1.06e-9 tonne/mm^3, k = 2.2e3 MPa, mu = 3.5e-9 MPa s).
-    fn default() -> Self {
-        BloodConstants { density_kg_m3: 1060.0, bulk_modulus_pa: 2.2e9, viscosity_pa_s: 3.5e-3 }
-    }
-}
-
-/// Loads and time stepping of the fluid-FSI deck.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct FsiControl {
-    /// Mean inlet velocity at the end of the ramp (parabolic profile), m/s.
-    pub inlet_mean_velocity_m_s: f64,
-    /// Outlet pressure at the end of the ramp, mmHg.
-    pub outlet_pressure_mmhg: f64,
-    /// Duration of the linear ramp of inflow and outlet pressure, s.
-    pub ramp_s: f64,
-    /// Time step, s.
-    pub step_size_s: f64,
-    /// Number of time steps.
-    pub time_steps: usize,
-    /// Backflow stabilization coefficient on the outlets.
-    pub backflow_beta: f64,
-}
-
-impl Default for FsiControl {
-    /// 0.1 m/s mean inflow and 100 mmHg at the outlet, ramped over 0.1 s in steps of 1 ms; the
-    /// run covers the ramp (100 steps). The verified example ran 5 such steps.
-    fn default() -> Self {
-        FsiControl {
-            inlet_mean_velocity_m_s: 0.1,
-            outlet_pressure_mmhg: 100.0,
-            ramp_s: 0.1,
-            step_size_s: 1e-3,
-            time_steps: 100,
-            backflow_beta: 1.0,
-        }
-    }
-}
-
-/// The `[febio]` section of the case file: element type, loads and controls. The wall's layer
-/// constants are the shared `[material]` ([`super::material::WallMaterial`]), the same as the
-/// CalculiX and Abaqus decks'.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct FebioConfig {
-    /// Element of `wall.feb`: `hex8` (default) or `hex20`.
-    pub element: FebioElement,
-    /// Lumen pressure at the end of the static ramp of `wall.feb`, mmHg.
-    pub lumen_pressure_mmhg: f64,
-    /// Steps of the static ramp of `wall.feb` (the load reaches its value at t = 1).
-    pub static_steps: usize,
-    pub blood: BloodConstants,
-    pub fsi: FsiControl,
-}
-
-impl Default for FebioConfig {
-    fn default() -> Self {
-        FebioConfig {
-            element: FebioElement::Hex8,
-            lumen_pressure_mmhg: 100.0,
-            static_steps: 10,
-            blood: BloodConstants::default(),
-            fsi: FsiControl::default(),
-        }
-    }
-}
-
-impl FebioConfig {
-    /// Checks ranges; a bad value is named with its key.
-    pub fn validate(&self) -> Result<()> {
-        let bad = |key: &str, why: &str| Err(Error::Config(format!("febio.{key}: {why}")));
-        let positive = |x: f64| x > 0.0 && x.is_finite();
-        let non_negative = |x: f64| x >= 0.0 && x.is_finite();
-        let b = &self.blood;
-        if !positive(b.density_kg_m3) || !positive(b.bulk_modulus_pa) || !positive(b.viscosity_pa_s) {
-            return bad("blood", "density, bulk modulus and viscosity must be positive");
-        }
-        if !self.lumen_pressure_mmhg.is_finite() || self.static_steps == 0 {
-            return bad("lumen_pressure_mmhg/static_steps", "need a finite pressure and at least one step");
-        }
-        let f = &self.fsi;
-        if !positive(f.ramp_s) || !positive(f.step_size_s) || f.time_steps == 0 {
-            return bad("fsi", "ramp_s and step_size_s must be positive and time_steps at least 1");
-        }
-        if !f.inlet_mean_velocity_m_s.is_finite()
-            || !f.outlet_pressure_mmhg.is_finite()
-            || !non_negative(f.backflow_beta)
-        {
-            return bad("fsi", "inlet velocity and outlet pressure must be finite, backflow_beta not negative");
-        }
-        Ok(())
-    }
-}
 
 // ------------------------------------------------------------------------------------------------
 // Units
@@ -1051,7 +909,7 @@ pub fn write_fsi(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::units::LengthUnit;
+    use crate::data::units::LengthUnit;
 
     #[test]
     fn templates_fill_strictly() {

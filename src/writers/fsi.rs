@@ -56,10 +56,10 @@ use super::openfoam::{
 };
 use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
-use crate::config::InletProfile;
-use crate::error::{Error, Result};
-use crate::mesh::{face_nodes, quad_area_vector, sets, VesselMesh};
-use crate::units::LengthUnit;
+use crate::data::config::InletProfile;
+use crate::data::error::{Error, Result};
+use crate::geometry::mesh::{face_nodes, quad_area_vector, sets, VesselMesh};
+use crate::data::units::LengthUnit;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -392,7 +392,7 @@ pub fn write_fsi_of(mesh: &VesselMesh, poly: &PolyMesh, options: &WriteOptions, 
             ("TIME_WINDOW", fmt_const(dt)),
             ("END_TIME", fmt_const(end)),
             ("NSET", nset.clone()),
-            ("UNITS", crate::units::MechanicalUnits::of(LengthUnit::M).describe()),
+            ("UNITS", crate::data::units::MechanicalUnits::of(LengthUnit::M).describe()),
         ],
     )?;
     let rel = "calculix/fsi.inp";

@@ -18,7 +18,7 @@
 //!   `LUMEN_RING` (the interface nodes of the middle cross-section, for `*NODE PRINT`); a
 //!   `*SURFACE, TYPE=ELEMENT` for every face set of wall elements (`WALL_LUMEN`: the pressure
 //!   surface, `WALL_OUTER`, `WALL_INLET`, `WALL_OUTLET`), faces labelled S1..S6 from the
-//!   canonical face table ([`crate::mesh::abaqus_face_label`]). Names are upper case, `[A-Z0-9_]`,
+//!   canonical face table ([`crate::geometry::mesh::abaqus_face_label`]). Names are upper case, `[A-Z0-9_]`,
 //!   at most 80 characters.
 //! * Boundary conditions: every end ring gets a cylindrical `*TRANSFORM` about the end's axis
 //!   (local 1 radial, 2 circumferential, 3 axial) and has local dofs 2 and 3 fixed. The axial
@@ -38,7 +38,7 @@
 //!
 //! # Units
 //! Mesh lengths are mm; the deck uses `WriteOptions::length_unit` and the consistent system
-//! below. The layer constants are the shared [`WallMaterial`](super::material::WallMaterial)
+//! below. The layer constants are the shared [`WallMaterial`](crate::data::config::material::WallMaterial)
 //! (kPa, kg/m^3; C10 = c/2, D = 2/K), converted:
 //!
 //! | length | force | stress | mass  | 100 mmHg       |
@@ -57,11 +57,11 @@
 
 use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
-use crate::error::{Error, Result};
-use crate::mesh::{abaqus_face_label, sets, ElementFace, Region, VesselMesh, FACE_INNER, HEX_EDGES};
-use crate::units::MechanicalUnits;
+pub use crate::data::config::fe::{ElementType, FeConfig, MaterialModel};
+use crate::data::error::{Error, Result};
+use crate::geometry::mesh::{abaqus_face_label, sets, ElementFace, Region, VesselMesh, FACE_INNER, HEX_EDGES};
+use crate::data::units::MechanicalUnits;
 use nalgebra::Point3;
-use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -99,91 +99,11 @@ impl Dialect {
     }
 }
 
-/// Continuum element types.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "UPPERCASE")]
-pub enum ElementType {
-    C3D8,
-    C3D8H,
-    C3D8R,
-    C3D8I,
-    C3D20,
-    C3D20H,
-    C3D20R,
-    C3D20RH,
-}
-
-impl ElementType {
-    pub fn name(self) -> &'static str {
-        match self {
-            ElementType::C3D8 => "C3D8",
-            ElementType::C3D8H => "C3D8H",
-            ElementType::C3D8R => "C3D8R",
-            ElementType::C3D8I => "C3D8I",
-            ElementType::C3D20 => "C3D20",
-            ElementType::C3D20H => "C3D20H",
-            ElementType::C3D20R => "C3D20R",
-            ElementType::C3D20RH => "C3D20RH",
-        }
-    }
-    /// 20-node serendipity brick.
-    pub fn is_quadratic(self) -> bool {
-        matches!(self, ElementType::C3D20 | ElementType::C3D20H | ElementType::C3D20R | ElementType::C3D20RH)
-    }
-    /// CalculiX has no hybrid elements.
-    pub fn in_calculix(self) -> bool {
-        !matches!(self, ElementType::C3D8H | ElementType::C3D20H | ElementType::C3D20RH)
-    }
-}
-
-/// Which material template the decks use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum MaterialModel {
-    /// Holzapfel-Gasser-Ogden with two fibre families at +-beta (Abaqus `*ANISOTROPIC
-    /// HYPERELASTIC, HOLZAPFEL`; CalculiX `ELASTIC_FIBER` user material).
-    Hgo,
-    /// Isotropic linear elastic (`*ELASTIC`), e.g. to compare with Lame's solution.
-    LinearElastic,
-}
-
-impl MaterialModel {
-    fn template(self) -> &'static str {
-        match self {
-            MaterialModel::Hgo => "material_hgo.inp",
-            MaterialModel::LinearElastic => "material_linear_elastic.inp",
-        }
-    }
-}
-
-/// Settings of the Abaqus and CalculiX decks (case file section `[fe]`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct FeConfig {
-    /// Element type of the Abaqus deck: C3D8H (default, hybrid for near-incompressible
-    /// tissue), C3D8, C3D8R, C3D8I, C3D20, C3D20H, C3D20R or C3D20RH.
-    pub abaqus_element: ElementType,
-    /// Element type of the CalculiX deck: C3D8I (default), C3D8, C3D8R, C3D20 or C3D20R.
-    pub calculix_element: ElementType,
-    /// Material template: `hgo` (default) or `linear_elastic`.
-    pub material: MaterialModel,
-    /// Folder whose `abaqus/` and `calculix/` files replace the built-in templates of the same
-    /// name (`material_hgo.inp`, `material_linear_elastic.inp`, `step_inflation.inp`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub template_dir: Option<PathBuf>,
-    /// Lumen pressure of the inflation step, mmHg.
-    pub pressure_mmhg: f64,
-}
-
-impl Default for FeConfig {
-    fn default() -> Self {
-        FeConfig {
-            abaqus_element: ElementType::C3D8H,
-            calculix_element: ElementType::C3D8I,
-            material: MaterialModel::Hgo,
-            template_dir: None,
-            pressure_mmhg: 100.0,
-        }
+/// The material template of the decks' model.
+fn material_template(model: MaterialModel) -> &'static str {
+    match model {
+        MaterialModel::Hgo => "material_hgo.inp",
+        MaterialModel::LinearElastic => "material_linear_elastic.inp",
     }
 }
 
@@ -251,7 +171,7 @@ fn builtin_template(dialect: Dialect, file: &str) -> Option<&'static str> {
 fn template(fe: &FeConfig, dialect: Dialect, file: &str) -> Result<(String, String)> {
     if let Some(dir) = &fe.template_dir {
         let rel = Path::new(dialect.folder()).join(file);
-        if let Some(found) = super::template::read_user_template(dir, &rel)? {
+        if let Some(found) = crate::io::templates::read_user_template(dir, &rel)? {
             return Ok(found);
         }
     }
@@ -338,9 +258,9 @@ impl MidEdges {
         self.of_element[e - self.wall_start]
     }
     /// Mid-edge nodes of face `f` of wall element `e`, in the order of the face's edges
-    /// (corner 0-1, 1-2, 2-3, 3-0 of [`crate::mesh::HEX_FACES`]): the nodes 5..8 of a quad8 facet.
+    /// (corner 0-1, 1-2, 2-3, 3-0 of [`crate::geometry::mesh::HEX_FACES`]): the nodes 5..8 of a quad8 facet.
     pub fn of_face(&self, e: usize, f: usize) -> [u32; 4] {
-        let corners = crate::mesh::HEX_FACES[f];
+        let corners = crate::geometry::mesh::HEX_FACES[f];
         let mids = self.of_element(e);
         std::array::from_fn(|i| {
             let (a, b) = (corners[i], corners[(i + 1) % 4]);
@@ -550,7 +470,7 @@ impl<'a> Deck<'a> {
         }
 
         // Materials.
-        let (mat_text, mat_source) = template(fe, dialect, fe.material.template())?;
+        let (mat_text, mat_source) = template(fe, dialect, material_template(fe.material))?;
         let mut layers = Vec::new();
         for region in Region::WALL {
             let range = mesh.region_range(region);
@@ -872,7 +792,7 @@ pub fn write_inp(mesh: &VesselMesh, options: &WriteOptions, dialect: Dialect, di
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{quad_area_vector, HEX_FACES};
+    use crate::geometry::mesh::{quad_area_vector, HEX_FACES};
     use nalgebra::Vector3;
 
     fn unit_cube() -> [Point3<f64>; 8] {
@@ -915,7 +835,7 @@ mod tests {
         assert!((outward + inward).norm() < 1e-12, "{label}: {outward:?} vs {inward:?}");
         // And outward means away from the cube's centre.
         let centre = Point3::new(0.5, 0.5, 0.5);
-        assert!((crate::mesh::face_centre(&c, f) - centre).dot(&outward) > 0.0);
+        assert!((crate::geometry::mesh::face_centre(&c, f) - centre).dot(&outward) > 0.0);
         let expected = [
             Vector3::new(0.0, 0.0, -1.0),
             Vector3::new(0.0, 0.0, 1.0),

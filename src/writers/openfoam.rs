@@ -46,9 +46,9 @@
 
 use super::text::{write_binary, write_items, Text};
 use super::{write_atomic, WriteOptions};
-use crate::config::{FoamSolver, InletProfile, OpenFoamConfig};
-use crate::error::{Error, Result};
-use crate::mesh::{closest_on_segment, face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh, HEX_FACES};
+use crate::data::config::{FoamSolver, InletProfile, OpenFoamConfig};
+use crate::data::error::{Error, Result};
+use crate::geometry::mesh::{closest_on_segment, face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh, HEX_FACES};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use std::io::Write;
@@ -247,7 +247,7 @@ struct PatchSpec<'a> {
 const UNASSIGNED: u32 = u32::MAX;
 
 /// The cells of `hexes` around each node, ascending: node n's are `around[first[n]..first[n + 1]]`.
-fn cells_around_nodes(hexes: &[crate::mesh::Hex], n_nodes: usize) -> (Vec<u32>, Vec<u32>) {
+fn cells_around_nodes(hexes: &[crate::geometry::mesh::Hex], n_nodes: usize) -> (Vec<u32>, Vec<u32>) {
     let mut first = vec![0u32; n_nodes + 1];
     for h in hexes {
         for &n in h {
@@ -333,7 +333,7 @@ fn face_partners(mesh: &VesselMesh, cells: Range<usize>) -> Result<Vec<u32>> {
 /// of `hex` among `q` as a bit mask, compared with each face's corners: one pass over the corners
 /// instead of sorting the nodes of all six faces. The faces of a degenerate element (a node
 /// twice) are compared node by node, as the mask may then name the wrong one.
-fn face_on(hex: &crate::mesh::Hex, q: &[u32; 4], key: &[u32; 4]) -> Option<usize> {
+fn face_on(hex: &crate::geometry::mesh::Hex, q: &[u32; 4], key: &[u32; 4]) -> Option<usize> {
     let sorted = |g: usize| {
         let mut k = face_nodes(hex, g);
         k.sort_unstable();
@@ -530,11 +530,11 @@ fn end_patches<'a>(mesh: &'a VesselMesh, ends: &EndNames) -> Result<Vec<PatchSpe
 }
 
 /// The polyMesh of the fluid: patches inlet, outlets, wall; cellZone lumen. With flow
-/// extensions (see [`crate::extensions`]), their cells follow the lumen's, in cellZone
+/// extensions (see [`crate::stages::additions::extensions`]), their cells follow the lumen's, in cellZone
 /// `extension`, their rigid wall is the patch `extension_wall` (before `wall`) and the end
 /// patches lie at the extended ends.
 pub fn lumen_polymesh(mesh: &VesselMesh) -> Result<PolyMesh> {
-    let fluid = crate::extensions::fluid_view(mesh);
+    let fluid = crate::stages::additions::extensions::fluid_view(mesh);
     let mesh = &*fluid;
     let mut specs = end_patches(mesh, &EndNames::of(mesh)?)?;
     specs.extend(extension_wall_patch(mesh));
@@ -1253,7 +1253,7 @@ pub fn read_polymesh(case: &Path) -> Result<PolyMesh> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::MeshConfig;
+    use crate::data::config::MeshConfig;
     use crate::testing::straight_tube_mesh;
 
     fn tube() -> VesselMesh {
@@ -1330,7 +1330,7 @@ mod tests {
         for (k, binary) in [false, true, false].into_iter().enumerate() {
             let dir = base.join(k.to_string());
             let options = WriteOptions {
-                openfoam: crate::config::OpenFoamConfig { binary, ..Default::default() },
+                openfoam: crate::data::config::OpenFoamConfig { binary, ..Default::default() },
                 ..Default::default()
             };
             write_openfoam(&m, &options, &dir).unwrap();

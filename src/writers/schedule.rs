@@ -10,8 +10,8 @@
 //! not a second polyMesh.
 
 use super::{fsi, openfoam, WriteOptions};
-use crate::error::Result;
-use crate::mesh::VesselMesh;
+use crate::data::error::Result;
+use crate::geometry::mesh::VesselMesh;
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};

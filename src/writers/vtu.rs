@@ -13,8 +13,8 @@
 
 use super::text::write_binary;
 use super::{write_atomic, WriteOptions};
-use crate::error::{Error, Result};
-use crate::mesh::VesselMesh;
+use crate::data::error::{Error, Result};
+use crate::geometry::mesh::VesselMesh;
 use nalgebra::Vector3;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
@@ -186,7 +186,7 @@ pub fn write_vtu(mesh: &VesselMesh, options: &WriteOptions, dir: &Path) -> Resul
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::MeshConfig;
+    use crate::data::config::MeshConfig;
 
     /// The arrays of a file this module writes, read back by name: (type, little-endian bytes).
     /// (vtkio reads only base64 appended data; VTK and meshio read the file in tests/vtu.rs.)

@@ -25,9 +25,9 @@
 //! Stresses are given in kPa (the unit HGO constants are quoted in) and density in kg/m^3, and
 //! are converted to each deck's consistent system ([`MechanicalUnits`]).
 
-use crate::error::{Error, Result};
-use crate::mesh::Region;
-use crate::units::MechanicalUnits;
+use crate::data::error::{Error, Result};
+use crate::data::region::Region;
+use crate::data::units::MechanicalUnits;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -159,7 +159,7 @@ pub struct WallMaterial {
 
 impl Default for WallMaterial {
     /// HGO 2000 with c and k1 x100 ([`LayerMaterial::hgo2000_media_x100`]); the intima takes the
-    /// media's constants, as it takes its fibre angle in [`crate::config::WallConfig`], the usual
+    /// media's constants, as it takes its fibre angle in [`crate::data::config::WallConfig`], the usual
     /// choice when the intima is not characterised separately.
     fn default() -> Self {
         WallMaterial {
@@ -222,7 +222,7 @@ pub fn check_removed_keys(case: &toml::Table, path: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::units::LengthUnit;
+    use crate::data::units::LengthUnit;
 
     #[test]
     fn defaults_are_valid_and_bounded() {

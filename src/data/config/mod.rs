@@ -4,11 +4,14 @@
 //! the local maximal inscribed sphere radius of the centerline; lengths ending in `_mm` are
 //! absolute, in the *output* length unit's millimetre equivalent (internally mm).
 
-use crate::error::{one_line, Error, Result};
-use crate::mesh::{Region, WallLayer};
-use crate::units::LengthUnit;
+use crate::data::error::{Error, Result};
+use crate::data::region::{Region, WallLayer};
+use crate::data::units::LengthUnit;
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+
+pub mod fe;
+pub mod febio;
+pub mod material;
 
 /// Resolution presets.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -178,7 +181,7 @@ pub struct WallConfig {
     pub adventitia: LayerConfig,
     /// The segmented outer wall surface (`--wall-surface`; a case file's path is relative to
     /// its folder): the wall then runs from the lumen to it along each node's growth direction,
-    /// its thickness as segmented (see [`crate::wall_surfaces`]).
+    /// its thickness as segmented (see [`crate::stages::additions::wall_surfaces`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub surface: Option<std::path::PathBuf>,
     /// Segmented surfaces between the layers, from the inside out (intima|media, then
@@ -246,7 +249,7 @@ impl Default for ExtendedEnds {
     }
 }
 
-/// Flow extensions (section `[extensions]`, see [`crate::extensions`]): every chosen vessel end
+/// Flow extensions (section `[extensions]`, see [`crate::stages::additions::extensions`]): every chosen vessel end
 /// is extended along its axis so that the flow develops before it leaves and the inlet and
 /// outlets are circular; the extensions' fluid is region `extension`, without a wall.
 ///
@@ -349,7 +352,7 @@ impl ExtensionsConfig {
     }
 }
 
-/// Refinement of the whole mesh (section `[refinement]`, see [`crate::refinement`]): every hex
+/// Refinement of the whole mesh (section `[refinement]`, see [`crate::stages::additions::refinement`]): every hex
 /// split k-fold in each direction, before projection (every new lumen-surface node cast onto the
 /// triangles: the mesh follows the triangles, facets and all) or after it (new nodes on a smooth
 /// surface through the projected ones: the smooth shape is kept with few projected points). De
@@ -501,13 +504,13 @@ pub struct MeshConfig {
     pub openfoam: OpenFoamConfig,
     /// FEBio materials, loads and controls.
     #[serde(default)]
-    pub febio: crate::writers::febio::FebioConfig,
+    pub febio: febio::FebioConfig,
     /// Abaqus and CalculiX decks (`[fe]`).
     #[serde(default)]
-    pub fe: crate::writers::inp::FeConfig,
+    pub fe: fe::FeConfig,
     /// Per-layer wall constants of every FE deck (`[material]`).
     #[serde(default)]
-    pub material: crate::writers::material::WallMaterial,
+    pub material: material::WallMaterial,
     /// Flow extensions at the vessel's ends (`[extensions]`; none by default).
     #[serde(default, skip_serializing_if = "ExtensionsConfig::is_default")]
     pub extensions: ExtensionsConfig,
@@ -560,86 +563,6 @@ impl MeshConfig {
             }
         }
         c
-    }
-
-    /// Reads a case file on top of a preset: `forced_preset` (the command line's) if given,
-    /// else the one the file names, else coarse.
-    ///
-    /// The preset is applied first, then every key of the file, so a file can name a preset
-    /// and change only what differs.
-    pub fn from_case_file(path: &Path, forced_preset: Option<Preset>) -> Result<Self> {
-        let bytes = crate::input::read_regular_file(path, MAX_CASE_FILE_BYTES, "cannot read the case file")?;
-        let text = crate::input::text_of(bytes).map_err(|e| Error::input(path, e))?;
-        MeshConfig::from_case_text(&text, path, forced_preset, true)
-    }
-
-    /// The settings of a case file given as a table (the Python package's `config={...}`),
-    /// checked as a case file is; errors name `source` and the key, with no line (the table has
-    /// none). A relative `fe.template_dir` is taken from the current folder.
-    pub fn from_case_table(table: toml::Table, source: &Path, forced_preset: Option<Preset>) -> Result<Self> {
-        let text = toml::to_string(&table).map_err(|e| {
-            Error::input(source, format!("cannot be written as a case file: {}", one_line(&e.to_string())))
-        })?;
-        MeshConfig::from_case_text(&text, source, forced_preset, false)
-    }
-
-    /// A case file's text on top of a preset; errors name the line of the key when `lines`.
-    fn from_case_text(text: &str, path: &Path, forced_preset: Option<Preset>, lines: bool) -> Result<Self> {
-        let line_of_key = |text: &str, keys: &[&str]| if lines { line_of_key(text, keys) } else { None };
-        let at = |e: &toml::de::Error| match e.span() {
-            Some(span) if lines => format!("{}: ", place(text, span.start)),
-            _ => String::new(),
-        };
-        let value: toml::Table = toml::from_str(text)
-            .map_err(|e| Error::input(path, format!("{}not valid TOML: {}", at(&e), one_line(e.message()))))?;
-        let mut value = value;
-        crate::writers::material::check_removed_keys(&value, path)?;
-        let file_preset = match value.remove("preset") {
-            Some(toml::Value::String(s)) => Some(s.parse::<Preset>().map_err(|e| Error::input(path, e))?),
-            Some(_) => return Err(Error::input(path, "`preset` must be a string: coarse, medium or fine")),
-            None => None,
-        };
-        let preset = forced_preset.or(file_preset).unwrap_or_default();
-        let base = toml::Value::try_from(MeshConfig::preset(preset))
-            .map_err(|e| Error::Config(format!("internal: cannot serialise preset: {e}")))?;
-        let merged = merge(base, toml::Value::Table(value));
-        let mut config: MeshConfig = merged.try_into().map_err(|e: toml::de::Error| {
-            let (table, message, field) = error_place(&e);
-            let key: Vec<&str> = table.iter().chain(&field).map(String::as_str).collect();
-            let at = line_of_key(text, &key).map_or(String::new(), |l| format!("line {l}: "));
-            let within = match (&field, table.is_empty()) {
-                (_, true) => String::new(),
-                (Some(_), false) => format!(" in [{}]", table.join(".")),
-                (None, false) => format!(" (`{}`)", table.join(".")),
-            };
-            Error::input(path, format!("{at}{message}{within}; `vesselhex mesh --help` lists the keys"))
-        })?;
-        config.fe.template_dir = match config.fe.template_dir.take() {
-            Some(dir) => Some(resolve_template_dir(path, &dir).map_err(|message| {
-                let at = line_of_key(text, &["fe", "template_dir"]).map_or(String::new(), |l| format!("line {l}: "));
-                Error::input(path, format!("{at}{message}"))
-            })?),
-            None => None,
-        };
-        let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        let relative_to_case = |p: &mut std::path::PathBuf| {
-            if p.is_relative() {
-                *p = base.join(&*p);
-            }
-        };
-        config.wall.surface.iter_mut().for_each(relative_to_case);
-        config.wall.surfaces.iter_mut().for_each(relative_to_case);
-        config.validate().map_err(|e| match e {
-            Error::Config(message) => {
-                // Messages start with the key: "lumen.core_elements: ...", "febio.element = ...".
-                let key = message.split([':', ' ', '=']).next().unwrap_or_default();
-                let keys: Vec<&str> = key.split('.').collect();
-                let at = line_of_key(text, &keys).map_or(String::new(), |l| format!("line {l}: "));
-                Error::input(path, format!("{at}{message}"))
-            }
-            other => other,
-        })?;
-        Ok(config)
     }
 
     /// Checks ranges; a bad value is named with its key and the accepted range.
@@ -764,47 +687,44 @@ impl MeshConfig {
                 "must list the two surfaces between the layers, inside out: intima|media, then media|adventitia",
             );
         }
-        if let Some(dir) = &self.fe.template_dir {
-            crate::writers::template::check_template_dir(dir)?;
-        }
-        crate::writers::check_format_settings(self)?;
-        Ok(())
+        self.check_format_settings()
     }
 
-    /// What a user should know about settings that were accepted: fractions normalised, no
-    /// format asked for.
-    pub fn warnings(&self) -> Vec<crate::report::Warning> {
-        let mut out = vec![];
-        let w = &self.wall;
-        let fractions = [w.intima.fraction, w.media.fraction, w.adventitia.fraction];
-        let total: f64 = fractions.iter().sum();
-        if (total - 1.0).abs() > 1e-9 {
-            let normalised: Vec<String> = fractions.iter().map(|f| format!("{:.3}", f / total)).collect();
-            out.push(crate::report::Warning::new(
-                "settings",
-                format!(
-                    "the wall layer fractions {}/{}/{} (intima/media/adventitia) sum to {total}; they were normalised \
-                     to {}",
-                    fractions[0],
-                    fractions[1],
-                    fractions[2],
-                    normalised.join("/")
-                ),
+    /// Settings that a requested format cannot write, found before any meshing (the writers
+    /// check them again when called directly): hex20 in `febio-fsi`, a quadratic CalculiX element
+    /// in `fsi`, a fibre dispersion in the CalculiX decks (`calculix`, `fsi`).
+    fn check_format_settings(&self) -> Result<()> {
+        let wants = |f: &str| self.formats.iter().any(|x| x == f);
+        if wants("febio-fsi") && self.febio.element == febio::FebioElement::Hex20 {
+            return Err(Error::Config(
+                "febio.element = \"hex20\" with format febio-fsi: the fluid-FSI deck is hex8 only (lumen and wall share \
+                 every interface node); write febio-fsi in a run with element = \"hex8\""
+                    .into(),
             ));
         }
-        if self.formats.is_empty() {
-            out.push(crate::report::Warning::new(
-                "settings",
-                "formats is empty (formats = []): no mesh is written, only report.json; name the formats wanted, e.g. \
-                 formats = [\"vtu\"] in the case file or --formats vtu",
-            ));
+        if wants("fsi") && self.fe.calculix_element.is_quadratic() {
+            return Err(Error::Config(format!(
+                "fe.calculix_element = {} with format fsi: the FSI package couples bilinear faces only; use C3D8I, C3D8 \
+                 or C3D8R",
+                self.fe.calculix_element.name()
+            )));
         }
-        out
+        if (wants("calculix") || wants("fsi")) && self.fe.material == fe::MaterialModel::Hgo {
+            for region in Region::WALL {
+                let kappa = self.material.layer(region).kappa;
+                if kappa != 0.0 {
+                    return Err(Error::Config(format!(
+                        "material.{}.kappa = {kappa}: CalculiX's fibre material has no dispersion; set kappa = 0 or \
+                         leave out the calculix and fsi formats",
+                        region.name()
+                    )));
+                }
+            }
+        }
+        Ok(())
     }
 }
 
-/// Largest case file read.
-const MAX_CASE_FILE_BYTES: u64 = 1 << 20;
 /// Largest length setting in mm (a kilometre).
 const MAX_LENGTH_MM: f64 = 1e6;
 /// Thinnest wall relative to the radius, and the least share of it a layer may have: thinner
@@ -823,86 +743,6 @@ const MAX_SMOOTHING_PASSES: usize = 100_000;
 const MAX_STEPS: usize = 100_000;
 const MAX_PRESSURE_MMHG: f64 = 1e4;
 
-/// `line L, column C` of a byte offset in `text`.
-fn place(text: &str, at: usize) -> String {
-    let before = &text[..at.min(text.len())];
-    let line = before.matches('\n').count() + 1;
-    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-    format!("line {line}, column {column}")
-}
-
-/// Where a deserialisation error is: the key path it names (`in `lumen.radial_elements``), its
-/// message, and for an "unknown field" error the unknown key (in that path's table).
-fn error_place(e: &toml::de::Error) -> (Vec<String>, String, Option<String>) {
-    let message = one_line(e.message());
-    let shown = e.to_string();
-    let keys: Vec<String> = shown
-        .rsplit_once("in `")
-        .and_then(|(_, rest)| rest.split_once('`'))
-        .map(|(path, _)| path.split('.').map(str::to_string).collect())
-        .unwrap_or_default();
-    let field = message.strip_prefix("unknown field `").and_then(|r| r.split_once('`')).map(|(f, _)| f.to_string());
-    (keys, message, field)
-}
-
-/// The line of the key at `keys` (a table path, then the key) in the case file's text.
-fn line_of_key<S: AsRef<str>>(text: &str, keys: &[S]) -> Option<usize> {
-    let document = toml::de::DeTable::parse(text).ok()?;
-    let mut table = document.get_ref();
-    let mut span = None;
-    for (i, key) in keys.iter().enumerate() {
-        let (k, v) = table.get_key_value(key.as_ref())?;
-        span = Some(k.span());
-        if i + 1 < keys.len() {
-            match v.get_ref() {
-                toml::de::DeValue::Table(t) => table = t,
-                _ => return None,
-            }
-        }
-    }
-    let at = span?.start;
-    Some(text[..at.min(text.len())].matches('\n').count() + 1)
-}
-
-/// `fe.template_dir` as written in a case file: relative to the case file's folder, which it
-/// must not leave (an absolute path is taken as given).
-fn resolve_template_dir(case_file: &Path, dir: &Path) -> std::result::Result<std::path::PathBuf, String> {
-    if dir.is_absolute() {
-        return Ok(dir.to_path_buf());
-    }
-    let base = case_file.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let resolved = base.join(dir);
-    let (Ok(real_base), Ok(real)) = (base.canonicalize(), resolved.canonicalize()) else {
-        return Ok(resolved); // missing: validate names it
-    };
-    if !real.starts_with(&real_base) {
-        return Err(format!(
-            "fe.template_dir = \"{}\" leads out of the case file's folder (to {}); keep the templates in a folder \
-             beside the case file, or give an absolute path",
-            dir.display(),
-            real.display()
-        ));
-    }
-    Ok(resolved)
-}
-
-/// Recursively overlays `top` on `base` (tables merge key by key, anything else replaces).
-fn merge(base: toml::Value, top: toml::Value) -> toml::Value {
-    match (base, top) {
-        (toml::Value::Table(mut b), toml::Value::Table(t)) => {
-            for (k, v) in t {
-                let merged = match b.remove(&k) {
-                    Some(old) => merge(old, v),
-                    None => v,
-                };
-                b.insert(k, merged);
-            }
-            toml::Value::Table(b)
-        }
-        (_, top) => top,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -918,27 +758,6 @@ mod tests {
             })
             .collect();
         assert!(sizes[0] < sizes[1] && sizes[1] < sizes[2]);
-    }
-
-    #[test]
-    fn case_file_overrides_preset_key_by_key() {
-        let dir = std::env::temp_dir().join(format!("vesselhex-config-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join("case.toml");
-        std::fs::write(&p, "preset = \"medium\"\n[lumen]\nradial_elements = 9\n[wall.media]\nfraction = 0.5\nelements = 3\nfibre_angle_deg = 40.0\n").unwrap();
-        let c = MeshConfig::from_case_file(&p, None).unwrap();
-        assert_eq!(c.preset, Preset::Medium);
-        assert_eq!(c.lumen.radial_elements, 9);
-        assert_eq!(c.lumen.core_elements, MeshConfig::preset(Preset::Medium).lumen.core_elements);
-        assert_eq!(c.wall.media.elements, 3);
-        let forced = MeshConfig::from_case_file(&p, Some(Preset::Fine)).unwrap();
-        assert_eq!(forced.preset, Preset::Fine);
-        assert_eq!(forced.lumen.radial_elements, 9);
-        assert_eq!(forced.lumen.core_elements, MeshConfig::preset(Preset::Fine).lumen.core_elements);
-        std::fs::write(&p, "[lumen]\nradial_elementz = 9\n").unwrap();
-        let e = MeshConfig::from_case_file(&p, None).unwrap_err().to_string();
-        assert!(e.contains("radial_elementz") && e.contains("case.toml"), "{e}");
-        std::fs::remove_dir_all(&dir).ok();
     }
 
     /// The scale benchmark's 10 M-hex case steps 0.0045 radii along the vessel: a fine mesh,

@@ -3,8 +3,8 @@
 
 use super::{checked_centerlines, checked_surface, surface, CenterlinePolyline, Centerlines, Result};
 use super::{SurfaceReadReport, TriangleSurface};
-use crate::error::Error;
-use crate::units::LengthUnit;
+use crate::data::error::Error;
+use crate::data::units::LengthUnit;
 use indexmap::IndexMap;
 use nalgebra::Point3;
 use std::path::Path;

@@ -19,7 +19,7 @@
 use super::orientation::wind_outward;
 use super::topology::{boundary_loops, triangle_neighbours, NON_MANIFOLD};
 use super::TriangleSurface;
-use crate::error::{Error, Result};
+use crate::data::error::{Error, Result};
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 use std::collections::HashMap;

@@ -1,5 +1,5 @@
 //! Reading what users bring: lumen surfaces (STL, VTP) and centerlines (VMTK .vtp, legacy .vtk,
-//! CSV). Everything leaves this module in millimetres (see [`crate::units`]).
+//! CSV). Everything leaves this module in millimetres (see [`crate::data::units`]).
 
 mod arrays;
 mod centerline;
@@ -14,10 +14,11 @@ pub mod topology;
 mod vtk_legacy;
 mod vtp;
 
-use crate::error::{Error, Result};
-use crate::resources::short;
-pub use crate::resources::ReadLimits;
-use crate::units::LengthUnit;
+use crate::data::error::{Error, Result};
+use crate::data::diagnostics::short;
+pub use crate::geometry::surface::TriangleSurface;
+pub use crate::io::memory::ReadLimits;
+use crate::data::units::LengthUnit;
 pub use arrays::{centerlines_from_arrays, surface_from_arrays, PolylineArrays};
 pub use hygiene::{clean_surface, weld, HygieneReport};
 use indexmap::IndexMap;
@@ -27,18 +28,6 @@ pub use parts::{
 };
 use polydata::PolyData;
 use std::path::{Path, PathBuf};
-
-/// A triangulated lumen surface, lengths in millimetres.
-#[derive(Debug, Clone)]
-pub struct TriangleSurface {
-    pub vertices: Vec<Point3<f64>>,
-    /// Triangles as 0-based vertex indices (polygons with more than three points are fanned).
-    pub triangles: Vec<[u32; 3]>,
-    /// Per-triangle integer tag when the file carries one (e.g. SimVascular's `ModelFaceID`).
-    pub triangle_tags: Option<(String, Vec<i64>)>,
-    /// The file it came from (for messages).
-    pub source: PathBuf,
-}
 
 /// One centerline polyline as read, lengths in millimetres.
 #[derive(Debug, Clone)]
@@ -284,8 +273,8 @@ pub fn read_regular_file(path: &Path, max_bytes: u64, what: &'static str) -> Res
             format!(
                 "is {}, more than the {} a run reads from one file (a tenth of --max-memory); if the file is \
                  genuine, raise --max-memory",
-                crate::resources::show_bytes(size as f64),
-                crate::resources::show_bytes(max_bytes as f64)
+                crate::data::diagnostics::show_bytes(size as f64),
+                crate::data::diagnostics::show_bytes(max_bytes as f64)
             ),
         )
     };

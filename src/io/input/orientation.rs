@@ -20,7 +20,7 @@
 
 use super::topology::{boundary_loops, orient, signed_volume6, triangle_neighbours, BOUNDARY};
 use super::TriangleSurface;
-use crate::error::{Error, Result};
+use crate::data::error::{Error, Result};
 use nalgebra::Point3;
 
 /// How the triangles were wound, against the file.

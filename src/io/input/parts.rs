@@ -9,8 +9,8 @@
 
 use super::topology::{boundary_loops, loop_centre_and_area, orient_consistently};
 use super::{extension, read_surface_within, ReadLimits, SurfaceReadReport, TriangleSurface};
-use crate::error::{Error, Result};
-use crate::units::LengthUnit;
+use crate::data::error::{Error, Result};
+use crate::data::units::LengthUnit;
 use nalgebra::Point3;
 use std::path::{Path, PathBuf};
 

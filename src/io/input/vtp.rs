@@ -32,8 +32,8 @@ pub(crate) fn parse_within(bytes: &[u8], max_inflated: u64) -> Result<PolyData, 
         return Err(format!(
             "its binary arrays announce {} once decoded, more than the {} a run reads from one file (a tenth of \
              --max-memory): a corrupt file or a decompression bomb; if the file is genuine, raise --max-memory",
-            crate::resources::show_bytes(announced as f64),
-            crate::resources::show_bytes(max_inflated as f64)
+            crate::data::diagnostics::show_bytes(announced as f64),
+            crate::data::diagnostics::show_bytes(max_inflated as f64)
         ));
     }
     let decoded = header

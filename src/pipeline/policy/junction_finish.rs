@@ -3,9 +3,9 @@
 //! grows), each judged on its junctions' elements and its wall, and the best kept; a round
 //! after the first is built only while no finish meets the bars.
 
-use crate::config::WallGrowth;
-use crate::mesh::VesselMesh;
-use crate::volume::{
+use crate::data::config::WallGrowth;
+use crate::geometry::mesh::VesselMesh;
+use crate::stages::volume::{
     build_volume, JunctionOptimisation, JunctionVariant, JunctionWall, VolumeInputs, QUALITY_BAR_SJ, WALL_MEAN_BAR_SJ,
 };
 use rayon::prelude::*;
@@ -27,12 +27,12 @@ impl FinishQuality {
     /// A whole mesh's figures (its quality annotated).
     pub(crate) fn of_mesh(mesh: &VesselMesh) -> FinishQuality {
         let validity: Vec<f64> =
-            mesh.quality.iter().map(|q| crate::quality::validity_from(q.scaled_jacobian, q.face_pyramid)).collect();
+            mesh.quality.iter().map(|q| crate::geometry::quality::validity_from(q.scaled_jacobian, q.face_pyramid)).collect();
         FinishQuality::of(mesh, &validity, |_| true)
     }
 
     /// The figures from each element's validity (its scaled Jacobian while its face pyramids are
-    /// positive, see [`crate::quality::validity`]: a finish whose wall has a cell that checkMesh
+    /// positive, see [`crate::geometry::quality::validity`]: a finish whose wall has a cell that checkMesh
     /// fails loses as one with an inverted cell would): the worst of the elements `judged`, the
     /// worst of those in the wall, the mean over the wall (summed in element order, whatever the
     /// thread count).
@@ -137,7 +137,7 @@ fn judge(mesh: &VesselMesh, junction_of: &[Option<usize>]) -> FinishQuality {
             if junction_of[e].is_none() && !mesh.regions[e].is_wall() {
                 return f64::INFINITY;
             }
-            let q = crate::quality::validity(&mesh.corners(e));
+            let q = crate::geometry::quality::validity(&mesh.corners(e));
             if q.is_nan() {
                 f64::NEG_INFINITY
             } else {

@@ -25,11 +25,11 @@
 //!
 //! The `VesselEnd` keeps the vessel's own end: its centre and normal are the cut's.
 
-use crate::annotate::element_triad;
-use crate::config::{ExtensionShape, ExtensionsConfig};
-use crate::error::{Error, Result};
-use crate::mesh::{sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, FACE_DOWNSTREAM, FACE_OUTER};
-use crate::quality::{element_quality, Stats};
+use crate::stages::annotation::annotate::element_triad;
+use crate::data::config::{ExtensionShape, ExtensionsConfig};
+use crate::data::error::{Error, Result};
+use crate::geometry::mesh::{sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, FACE_DOWNSTREAM, FACE_OUTER};
+use crate::geometry::quality::{element_quality, Stats};
 use nalgebra::{Point3, Vector2, Vector3};
 use serde::Serialize;
 use std::borrow::Cow;
@@ -131,8 +131,8 @@ pub fn extend(mesh: &mut VesselMesh, config: &ExtensionsConfig) -> Result<Vec<Ex
 fn check_end_names(mesh: &VesselMesh, config: &ExtensionsConfig) -> Result<()> {
     let known: Vec<&str> = mesh.ends.iter().map(|e| e.name.as_str()).collect();
     let named = match &config.ends {
-        crate::config::ExtendedEnds::Names(n) => n.iter().map(|n| ("extensions.ends", n)).collect(),
-        crate::config::ExtendedEnds::Keyword(_) => Vec::new(),
+        crate::data::config::ExtendedEnds::Names(n) => n.iter().map(|n| ("extensions.ends", n)).collect(),
+        crate::data::config::ExtendedEnds::Keyword(_) => Vec::new(),
     };
     for (key, name) in named.into_iter().chain(config.length.keys().map(|n| ("extensions.length", n))) {
         let Some(end) = mesh.ends.iter().find(|e| e.name == *name) else {
@@ -159,7 +159,7 @@ fn end_section(mesh: &VesselMesh, end: &VesselEnd) -> Result<EndSection> {
     let faces = mesh.face_sets.get(&set).ok_or_else(|| missing(&format!("face set {set}")))?.clone();
     let interface = mesh.node_sets.get(sets::INTERFACE_NODES).ok_or_else(|| missing("lumen-wall interface"))?;
     let normal = end.outward_normal.normalize();
-    let e1 = crate::centerline::any_perpendicular(&normal).normalize();
+    let e1 = crate::geometry::vector::any_perpendicular(&normal).normalize();
     let basis = [e1, normal.cross(&e1)];
     let centre = end.centre;
     let in_plane = |p: &Point3<f64>| Vector2::new((p - centre).dot(&basis[0]), (p - centre).dot(&basis[1]));
@@ -190,8 +190,8 @@ fn end_section(mesh: &VesselMesh, end: &VesselEnd) -> Result<EndSection> {
         .iter()
         .map(|f| {
             let c = mesh.corners(f.element as usize);
-            let opposite = crate::mesh::OPPOSITE_FACE[f.face as usize];
-            (crate::mesh::face_centre(&c, f.face as usize) - crate::mesh::face_centre(&c, opposite)).dot(&normal)
+            let opposite = crate::geometry::mesh::OPPOSITE_FACE[f.face as usize];
+            (crate::geometry::mesh::face_centre(&c, f.face as usize) - crate::geometry::mesh::face_centre(&c, opposite)).dot(&normal)
         })
         .collect();
     let element_length = lengths.iter().sum::<f64>() / lengths.len().max(1) as f64;

@@ -33,9 +33,9 @@
 //! core boundary to the new surface node), the wall nodes above it in full (the wall keeps its
 //! interpolated thickness and direction).
 
-use crate::error::{Error, Result};
-use crate::mesh::{sets, ElementFace, Hex, Region, VesselMesh};
-use crate::surface::LumenSurface;
+use crate::data::error::{Error, Result};
+use crate::geometry::mesh::{sets, ElementFace, Hex, Region, VesselMesh};
+use crate::geometry::surface::LumenSurface;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
@@ -76,7 +76,7 @@ enum OnCoarse {
     Cell,
 }
 
-/// The unit-cube corner of canonical hex node `i` (see [`crate::mesh::unit_cube`]).
+/// The unit-cube corner of canonical hex node `i` (see [`crate::geometry::mesh::unit_cube`]).
 fn corner_of(i: usize) -> [usize; 3] {
     let (x, y) = [(0, 0), (1, 0), (1, 1), (0, 1)][i % 4];
     [x, y, i / 4]
@@ -209,7 +209,7 @@ fn split(mesh: &VesselMesh, k: usize) -> (VesselMesh, Vec<OnCoarse>) {
         layers: mesh
             .layers
             .iter()
-            .map(|l| crate::mesh::WallLayer { radial_elements: l.radial_elements * k, ..l.clone() })
+            .map(|l| crate::geometry::mesh::WallLayer { radial_elements: l.radial_elements * k, ..l.clone() })
             .collect(),
         ends: mesh.ends.clone(),
         node_sets: refined_node_sets(mesh, &new.on_coarse),
@@ -276,8 +276,8 @@ fn refined_face_sets(mesh: &VesselMesh, k: usize) -> IndexMap<String, Vec<Elemen
 fn surface_normals(mesh: &VesselMesh) -> HashMap<u32, Vector3<f64>> {
     let mut normals: HashMap<u32, Vector3<f64>> = HashMap::new();
     for f in &mesh.face_sets[sets::LUMEN_WALL_FACES] {
-        let q = crate::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
-        let a = crate::mesh::quad_area_vector(q.map(|n| mesh.nodes[n as usize]));
+        let q = crate::geometry::mesh::face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
+        let a = crate::geometry::mesh::quad_area_vector(q.map(|n| mesh.nodes[n as usize]));
         for n in q {
             *normals.entry(n).or_insert_with(Vector3::zeros) += a;
         }
@@ -314,7 +314,7 @@ impl SmoothSurface<'_> {
                 chord
             }
         };
-        crate::junction::hermite(&p0, &tangent(a), &p1, &tangent(b), u)
+        crate::stages::junction::hermite(&p0, &tangent(a), &p1, &tangent(b), u)
     }
 
     /// The Coons patch of the face with corners c (a cycle) at (s, t).
@@ -454,7 +454,7 @@ pub fn refine(mesh: &VesselMesh, k: usize, placement: Placement, radial_cells: u
     for (n, p) in targets {
         refined.nodes[n as usize] = p;
     }
-    crate::annotate::annotate(&mut refined);
+    crate::stages::annotation::annotate::annotate(&mut refined);
     Ok(refined)
 }
 

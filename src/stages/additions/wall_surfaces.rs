@@ -16,10 +16,10 @@
 //! junction, where the outer surface lies beyond the other branch) stops the run with a
 //! message naming the place.
 
-use crate::error::{Error, Result};
-use crate::mesh::{sets, VesselMesh};
-use crate::quality::Stats;
-use crate::surface::LumenSurface;
+use crate::data::error::{Error, Result};
+use crate::geometry::mesh::{sets, VesselMesh};
+use crate::geometry::quality::Stats;
+use crate::geometry::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -128,7 +128,7 @@ pub fn place(
         grown.push(placed.grown);
         thickness.push(placed.thickness);
     }
-    crate::annotate::annotate(mesh);
+    crate::stages::annotation::annotate::annotate(mesh);
     check_not_inverted(mesh, outer)?;
     Ok(WallSurfacesReport {
         outer: outer.surface.source.display().to_string(),
@@ -212,7 +212,7 @@ fn check_not_inverted(mesh: &VesselMesh, outer: &WallSurface) -> Result<()> {
     }) else {
         return Ok(());
     };
-    let c = crate::mesh::element_centre(&mesh.corners(e));
+    let c = crate::geometry::mesh::element_centre(&mesh.corners(e));
     Err(Error::Geometry(format!(
         "wall surfaces: wall element {} ({}) near {} is inverted (scaled Jacobian {:.3}) once the wall follows {}: \
          the segmented surfaces turn faster there than the lumen's columns can follow (try wall.growth = \

@@ -7,11 +7,11 @@
 //!   diagonal). It tells whether the mesh captures the shape, which node distances alone cannot.
 //!   Input vertices beyond the first and last mesh sections (caps, trimmed ends) are left out.
 
-use crate::centerline::Branch;
-use crate::error::Result;
-use crate::mesh::{face_nodes, sets, VesselMesh};
-use crate::projection::{BranchEnd, ProjectedBranch};
-use crate::surface::LumenSurface;
+use crate::stages::centerline::Branch;
+use crate::data::error::Result;
+use crate::geometry::mesh::{face_nodes, sets, VesselMesh};
+use crate::stages::projection::{BranchEnd, ProjectedBranch};
+use crate::geometry::surface::LumenSurface;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -127,7 +127,7 @@ pub fn surface_accuracy(
         }
     }
     let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&samples)
-        .map_err(|e| crate::error::Error::Geometry(format!("cannot index the centerlines: {e:?}")))?;
+        .map_err(|e| crate::data::error::Error::Geometry(format!("cannot index the centerlines: {e:?}")))?;
     let inside: Vec<usize> = (0..surface.vertices.len())
         .filter(|&i| {
             let v = surface.vertices[i];

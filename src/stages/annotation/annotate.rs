@@ -7,10 +7,10 @@
 //! e_circ x e_long = e_rad. Fibres lie in the circumferential-longitudinal plane at +-beta from
 //! e_circ (Holzapfel, Gasser, Ogden 2000): cos(beta) e_circ +- sin(beta) e_long.
 
-use crate::mesh::{
+use crate::geometry::mesh::{
     face_centre, ElementQuality, Region, Triad, VesselMesh, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER, FACE_UPSTREAM,
 };
-use crate::quality::element_quality;
+use crate::geometry::quality::element_quality;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
@@ -61,7 +61,7 @@ mod tests {
 
     #[test]
     fn triad_of_a_unit_cube_and_fibres_at_beta() {
-        let c = crate::mesh::unit_cube();
+        let c = crate::geometry::mesh::unit_cube();
         let t = element_triad(&c);
         assert!((t.e_rad - Vector3::x()).norm() < 1e-12);
         assert!((t.e_long - Vector3::z()).norm() < 1e-12);

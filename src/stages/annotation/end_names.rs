@@ -1,12 +1,12 @@
 //! The names of a mesh's vessel ends. The volume names them by role (`inlet`, then `outlet` or
 //! `outlet_1`, `outlet_2`, ... in branch order); where the user named an end (a cap given in a
-//! file of its own, see [`crate::input::read_surface_parts`]), the mesh end there takes that
+//! file of its own, see [`crate::io::input::read_surface_parts`]), the mesh end there takes that
 //! name, with its sets (`lumen_<end>`, `wall_<end>`, `cut_<end>`), so that every writer, which
 //! reads names from the mesh alone, follows: OpenFOAM patches, FEBio surfaces, Abaqus and
 //! CalculiX sets, the FSI maps' keys. report.json names every end as the mesh does.
 
-use crate::centerline_extract::VesselEnd;
-use crate::mesh::{sets, VesselMesh};
+use crate::stages::centerline::extract::VesselEnd;
+use crate::geometry::mesh::{sets, VesselMesh};
 
 /// A mesh end belongs to the end found on the surface nearest its centre within this many of
 /// that end's radii (a dome's mesh stops inside its tip).

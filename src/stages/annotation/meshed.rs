@@ -1,14 +1,14 @@
 //! A vessel meshed and not yet finished or written: the mesh and what was learnt on the way,
 //! shared by the pipeline that builds it and the stages that finish it.
 
-use crate::accuracy::SurfaceAccuracy;
-use crate::blocks::SectionTemplate;
-use crate::centerline::CenterlineTree;
-use crate::junction::JunctionGeometry;
-use crate::mesh::VesselMesh;
-use crate::projection::ProjectedBranch;
-use crate::report::Warning;
-use crate::volume::JunctionVariant;
+use crate::stages::annotation::accuracy::SurfaceAccuracy;
+use crate::stages::junction::blocks::SectionTemplate;
+use crate::stages::centerline::CenterlineTree;
+use crate::stages::junction::JunctionGeometry;
+use crate::geometry::mesh::VesselMesh;
+use crate::stages::projection::ProjectedBranch;
+use crate::data::diagnostics::Warning;
+use crate::stages::volume::JunctionVariant;
 
 /// A finished mesh with what was learnt on the way.
 pub struct Meshed {

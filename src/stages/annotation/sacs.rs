@@ -2,15 +2,15 @@
 //! palabos_cerebral_aneurysm's): the vessels' centerlines run through it, so it is meshed as
 //! the junction, and its elements are marked as the sac's in the mesh (`sac` in `mesh.vtu`,
 //! `sac_elements` of the junction in `report.json`). A sac that bulges beside the vessels is a
-//! blind branch instead (see [`crate::mesh::is_sac`]).
+//! blind branch instead (see [`crate::geometry::mesh::is_sac`]).
 //!
 //! The sac is the part of the junction's lumen outside its branches' own tubes (each branch's
 //! radius where it leaves the junction, about its centerline, which runs on to the junction's
 //! centre), and the wall over it.
 
-use crate::centerline::CenterlineTree;
-use crate::junction::JunctionGeometry;
-use crate::mesh::{closest_on_segment, face_key, VesselMesh, WallColumns, FACE_OUTER};
+use crate::stages::centerline::CenterlineTree;
+use crate::stages::junction::JunctionGeometry;
+use crate::geometry::mesh::{closest_on_segment, face_key, VesselMesh, WallColumns, FACE_OUTER};
 use nalgebra::{Point3, Vector3};
 use std::collections::HashMap;
 

@@ -9,7 +9,7 @@
 //! ends bend smoothly to it.
 
 use super::rooted::RootedTree;
-use crate::surface::LumenSurface;
+use crate::geometry::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
 
 /// The centre moves only when the ball it finds is this much larger than the file's centre's.

@@ -6,14 +6,16 @@
 //! never used: they are undefined on straight parts and flip at inflection points, which would
 //! twist the O-grid blocks and shear the elements.
 
+pub mod extract;
 mod junction_centre;
 mod rooted;
 pub(crate) mod skeleton;
 
-use crate::config::CenterlineConfig;
-use crate::error::{Error, Result};
-use crate::input::Centerlines;
-use crate::surface::LumenSurface;
+use crate::data::config::CenterlineConfig;
+use crate::data::error::{Error, Result};
+use crate::io::input::Centerlines;
+use crate::geometry::surface::LumenSurface;
+use crate::geometry::vector::any_perpendicular;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 pub(crate) use rooted::ForcedMerge;
@@ -39,19 +41,6 @@ impl Frame {
         let n = n.normalize();
         Frame { tangent: t, normal: n, binormal: t.cross(&n) }
     }
-}
-
-/// A deterministic unit vector perpendicular to `t`: the projection of the world axis least
-/// aligned with it.
-pub fn any_perpendicular(t: &Vector3<f64>) -> Vector3<f64> {
-    let axis = if t.x.abs() <= t.y.abs() && t.x.abs() <= t.z.abs() {
-        Vector3::x()
-    } else if t.y.abs() <= t.z.abs() {
-        Vector3::y()
-    } else {
-        Vector3::z()
-    };
-    (axis - t * axis.dot(t)).normalize()
 }
 
 /// One point of a branch after resampling and smoothing.
@@ -277,7 +266,7 @@ const INSIDE_WINDING: f64 = 0.5;
 /// except within two median radii of its ends, where an open end's winding number falls towards
 /// 1/2).
 fn radii_from_surface(
-    line: &crate::input::CenterlinePolyline,
+    line: &crate::io::input::CenterlinePolyline,
     surface: &LumenSurface,
     k: usize,
     path: &std::path::Path,
@@ -607,7 +596,7 @@ fn parallel_transport(pts: &[Point3<f64>], tangents: &[Vector3<f64>], first: Fra
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::input::CenterlinePolyline;
+    use crate::io::input::CenterlinePolyline;
     use indexmap::IndexMap;
 
     fn helix(n: usize) -> CenterlinePolyline {

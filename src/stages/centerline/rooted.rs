@@ -2,7 +2,7 @@
 //! edges removed, junctions closer than the merge distance merged, branches put in order.
 
 use super::skeleton::{Edge, Line, Node, Skeleton, APART};
-use crate::error::{Error, Result};
+use crate::data::error::{Error, Result};
 use nalgebra::Point3;
 use std::path::Path;
 

@@ -28,7 +28,7 @@
 //! (7.0 mm at the separation to 5.3 mm where the iliacs leave each other's tubes), so the
 //! largest sphere is wherever the region is made to start.
 
-use crate::error::{Error, Result};
+use crate::data::error::{Error, Result};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use std::path::Path;

@@ -14,7 +14,7 @@
 //! `radial_elements` layers, graded towards the wall; the wall grows beyond the surface along
 //! the same rays.
 
-use crate::centerline::CenterlineSample;
+use crate::stages::centerline::CenterlineSample;
 use nalgebra::{Point3, Vector2, Vector3};
 
 /// The 2D O-grid of one cross-section, shared by every station of a branch.

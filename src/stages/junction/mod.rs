@@ -30,12 +30,13 @@
 //!   ordinary section (leaving along the centerline) to its place on the fold (arriving across
 //!   its sector), and the rays that find the lumen wall follow the same interpolation.
 
+pub mod blocks;
 pub mod layout;
 
-use crate::blocks::SectionTemplate;
-use crate::centerline::{Branch, CenterlineSample, CenterlineTree, Frame};
-use crate::error::{Error, Result};
-use crate::surface::LumenSurface;
+use crate::stages::junction::blocks::SectionTemplate;
+use crate::stages::centerline::{Branch, CenterlineSample, CenterlineTree, Frame};
+use crate::data::error::{Error, Result};
+use crate::geometry::surface::LumenSurface;
 use nalgebra::{Matrix3, Point3, Vector2, Vector3};
 use std::f64::consts::{PI, TAU};
 

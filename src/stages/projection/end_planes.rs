@@ -10,8 +10,8 @@
 //! capped 11 degrees off square, the 2.5 mm lost were nearly all of the 3 mm the trunk had left
 //! beside its junction.
 
-use crate::centerline::{Branch, Frame};
-use crate::surface::LumenSurface;
+use crate::stages::centerline::{Branch, Frame};
+use crate::geometry::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
 
 /// Rays cast along the centerline towards a cap, from this fraction of the vessel's radius off
@@ -144,7 +144,7 @@ pub fn turn_to_caps(branch: &mut Branch, surface: &LumenSurface, radius: f64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::centerline::CenterlineSample;
+    use crate::stages::centerline::CenterlineSample;
 
     fn capped_tube(r: f64, h: f64, tilt: f64) -> LumenSurface {
         LumenSurface::new(&crate::testing::tilted_cap_tube_surface(r, h, tilt)).unwrap()
@@ -197,12 +197,12 @@ mod tests {
         let (r, h, tilt) = (2.0, 20.0, 12f64.to_radians());
         let surface = crate::testing::tilted_cap_tube_surface(r, h, tilt);
         let centerlines = crate::testing::straight_tube_centerline(r, h);
-        let config = crate::config::MeshConfig::preset(crate::config::Preset::Coarse);
+        let config = crate::data::config::MeshConfig::preset(crate::data::config::Preset::Coarse);
         let meshed =
-            crate::pipeline::mesh_vessel(&surface, &centerlines, &config, &mut crate::progress::Progress::new(true, 9))
+            crate::pipeline::mesh_vessel(&surface, &centerlines, &config, &mut crate::pipeline::progress::Progress::new(true, 9))
                 .expect("meshed");
         let normal = Vector3::new(tilt.sin(), 0.0, -tilt.cos());
-        let inlet = &meshed.mesh.node_sets[&crate::mesh::sets::lumen_end("inlet")];
+        let inlet = &meshed.mesh.node_sets[&crate::geometry::mesh::sets::lumen_end("inlet")];
         assert!(!inlet.is_empty());
         // Heights above the cap's plane: the same all round (parallel to the cap) and small (the
         // first clean section lies one centerline step in).

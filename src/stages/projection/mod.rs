@@ -8,16 +8,18 @@
 //! must at least be *valid* (every ray hits from the inside), otherwise the run stops with the
 //! place and the cause.
 
-use crate::blocks::SectionTemplate;
-use crate::centerline::{Branch, CenterlineSample};
-use crate::end_planes::EndCaps;
-use crate::error::{Error, Result};
-use crate::junction::{transition_points, FoldEnd, JunctionGeometry, TransitionPoints};
-use crate::surface::LumenSurface;
+use crate::stages::junction::blocks::SectionTemplate;
+use crate::stages::centerline::{Branch, CenterlineSample};
+use crate::stages::projection::end_planes::EndCaps;
+use crate::data::error::{Error, Result};
+use crate::stages::junction::{transition_points, FoldEnd, JunctionGeometry, TransitionPoints};
+use crate::geometry::surface::LumenSurface;
 use nalgebra::{Point3, Vector2, Vector3};
 use rayon::prelude::*;
 
 mod dome;
+pub mod plan;
+pub mod end_planes;
 pub use dome::DomeTop;
 
 /// Hit triangles whose normal is within this cosine of the axis mark a cap (about 70 degrees
@@ -286,7 +288,7 @@ pub struct ProjectionSetup<'a> {
     pub surface: &'a LumenSurface,
     pub spacing: &'a (dyn Fn(&CenterlineSample) -> f64 + Sync),
     /// The axial spacing of a junction's transitions and bridges (see
-    /// [`crate::config::LumenConfig::junction_axial_spacing`]).
+    /// [`crate::data::config::LumenConfig::junction_axial_spacing`]).
     pub junction_spacing: &'a (dyn Fn(&CenterlineSample) -> f64 + Sync),
     pub trim_inlet: f64,
     pub trim_outlet: f64,
@@ -302,7 +304,7 @@ pub struct ProjectionSetup<'a> {
 /// Finds the meshable part of a branch and projects its stations: ordinary sections between
 /// the vessel's ends (trimmed as the surface requires) or the transitions towards junctions,
 /// then the transition sections down to each folded end. `caps` are the flat caps its end
-/// sections were turned into (see [`crate::end_planes`]).
+/// sections were turned into (see [`crate::stages::projection::end_planes`]).
 pub fn project_branch(
     branch: &Branch,
     caps: &EndCaps,
@@ -459,7 +461,7 @@ pub fn project_branch(
     let end_junction = end_junction
         .map(|j| JunctionEnd { transition_length: if stub { length - s_end } else { j.transition_length }, ..*j });
     let positions =
-        if stub { vec![s_start] } else { crate::blocks::station_positions(s_start, s_end, |s| spacing(&branch.at(s))) };
+        if stub { vec![s_start] } else { crate::stages::junction::blocks::station_positions(s_start, s_end, |s| spacing(&branch.at(s))) };
     let sections: Vec<(Probe, ProjectedSection)> =
         positions.par_iter().map(|&s| ordinary_section(template, surface, &branch.at(s), orient)).collect();
     let mut ordinary = Vec::with_capacity(sections.len());
@@ -555,7 +557,7 @@ const CLEAR_SEARCH: f64 = 6.0;
 const NEAREST_SECTION: f64 = 0.5;
 
 /// The distance from a junction's centre, along a branch, of its last ordinary section: the
-/// geometric estimate of [`crate::junction::transition_length`], moved away from the junction
+/// geometric estimate of [`crate::stages::junction::transition_length`], moved away from the junction
 /// until the section and the next radius of the branch are clear of the other branches (or, on
 /// a branch ending short of the estimate, towards the junction when `steep_short_branches`
 /// allows). None when the branch runs to another junction and no section of this junction's half of it is
@@ -577,7 +579,7 @@ pub fn clear_transition_length(
     // project_branch (a short branch keeps only its end's section).
     let (run_reach, reach) =
         if far_junction { (0.5 * len, 0.5 * len) } else { (len - FAR_END_MARGIN * r, len - OUTLET_KEEP * r) };
-    let estimate = crate::junction::transition_length(geometry, slot);
+    let estimate = crate::stages::junction::transition_length(geometry, slot);
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     let at = |d: f64| branch.at(if at_start { d } else { len - d });
     // The frames are turned afterwards to meet the junctions, so rays are tried at several
@@ -612,7 +614,7 @@ pub fn clear_transition_length(
                 let f = base.frame;
                 let normal = f.normal * phi.cos() + f.binormal * phi.sin();
                 let st = CenterlineSample {
-                    frame: crate::centerline::Frame::from_tangent_and_hint(f.tangent, normal),
+                    frame: crate::stages::centerline::Frame::from_tangent_and_hint(f.tangent, normal),
                     ..base
                 };
                 let (probe, sec) = cast_section(setup.template, setup.surface, &st, orient);
@@ -866,14 +868,14 @@ fn land_missed_fold_rays(probe: &mut Probe, fold: &mut ProjectedSection, surface
 
 /// Direction in which a transition arrives at the fold at the template point `xy`.
 fn fold_arrival(j: &JunctionEnd, template: &SectionTemplate, xy: &Vector2<f64>) -> Vector3<f64> {
-    j.geometry.arrival(j.fold.slot, &crate::junction::turn(j.fold.quarter_turns, xy), template.core_size)
+    j.geometry.arrival(j.fold.slot, &crate::stages::junction::turn(j.fold.quarter_turns, xy), template.core_size)
 }
 
 /// A guide curve (Hermite end points and tangents) for each ring node.
 type GuideCurve = (Point3<f64>, Vector3<f64>, Point3<f64>, Vector3<f64>);
 
 fn on_guide(c: &GuideCurve, u: f64) -> Point3<f64> {
-    crate::junction::hermite(&c.0, &c.1, &c.2, &c.3, u)
+    crate::stages::junction::hermite(&c.0, &c.1, &c.2, &c.3, u)
 }
 
 /// Casts one transition section: the core kept off the wall, each ray aimed through its guide point.

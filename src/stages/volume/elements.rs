@@ -3,8 +3,8 @@
 
 use super::numbering::{top_hex, Numbering};
 use super::RadialLevels;
-use crate::mesh::{sets, ElementFace, Hex, Region, VesselEnd, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER, FACE_UPSTREAM};
-use crate::projection::{BranchEnd, ProjectedBranch};
+use crate::geometry::mesh::{sets, ElementFace, Hex, Region, VesselEnd, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER, FACE_UPSTREAM};
+use crate::stages::projection::{BranchEnd, ProjectedBranch};
 use indexmap::IndexMap;
 use nalgebra::Vector3;
 use std::collections::HashMap;

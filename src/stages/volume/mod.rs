@@ -7,18 +7,21 @@
 //! ordered lumen, intima, media, adventitia, each station interval by station interval.
 
 mod elements;
+pub mod node_optimisation;
 mod numbering;
+pub mod surface_smoothing;
+pub mod wall_directions;
 
-use crate::blocks::SectionTemplate;
-use crate::config::WallGrowth;
-use crate::junction::JunctionGeometry;
-use crate::mesh::{sets, Hex, Region, VesselMesh, WallLayer, HEX_EDGES};
-use crate::node_optimisation::{optimise_nodes, Freedom, PYRAMID_TARGET};
-use crate::projection::ProjectedBranch;
-use crate::quality::Validity;
-use crate::surface::LumenSurface;
-use crate::surface_smoothing::{smooth_on_surface, RayNode, SmoothedNode};
-use crate::wall_directions::{surface_normals, SurfaceGraph, JUNCTION_SMOOTHING_PASSES};
+use crate::stages::junction::blocks::SectionTemplate;
+use crate::data::config::WallGrowth;
+use crate::stages::junction::JunctionGeometry;
+use crate::geometry::mesh::{sets, Hex, Region, VesselMesh, WallLayer, HEX_EDGES};
+use crate::stages::volume::node_optimisation::{optimise_nodes, Freedom, PYRAMID_TARGET};
+use crate::stages::projection::ProjectedBranch;
+use crate::geometry::quality::Validity;
+use crate::geometry::surface::LumenSurface;
+use crate::stages::volume::surface_smoothing::{smooth_on_surface, RayNode, SmoothedNode};
+use crate::stages::volume::wall_directions::{surface_normals, SurfaceGraph, JUNCTION_SMOOTHING_PASSES};
 use elements::{
     add_lumen_elements, add_wall_elements, lumen_surface_quads, vessel_end_names, vessel_end_sets, vessel_end_tangents,
     Elements,
@@ -79,10 +82,10 @@ pub struct VolumeInputs<'a> {
 }
 
 /// Builds nodes, hexes, regions and sets of a vessel from its projected branches (one for an
-/// unbranched vessel). Triads, fibres and quality are filled in by [`crate::annotate`].
+/// unbranched vessel). Triads, fibres and quality are filled in by [`crate::stages::annotation::annotate`].
 ///
 /// Nodes of a folded end section are shared between the branches of a junction through their
-/// [`crate::junction::FoldKey`]; the wall grows from the lumen-surface nodes once per node, so the junction's
+/// [`crate::stages::junction::FoldKey`]; the wall grows from the lumen-surface nodes once per node, so the junction's
 /// lumen and wall are conformal by construction.
 ///
 /// The junction optimisation moves lumen nodes only, so one optimised lumen carries every wall
@@ -134,7 +137,7 @@ pub fn build_volume(
     // its walls are grown but not optimised: that optimisation is most of a finish's time (the
     // SPHinXsys arch at coarse, both finishes of its first round inverted: 2.0 s -> 1.25 s).
     let lumen_valid = !elements.hexes.par_iter().any(|h| {
-        let q = crate::quality::scaled_jacobian(&h.map(|n| nodes[n as usize]));
+        let q = crate::geometry::quality::scaled_jacobian(&h.map(|n| nodes[n as usize]));
         q.is_nan() || q <= 0.0
     });
     // The wall grows from the surface where its nodes ended up (they may have slid).
@@ -163,7 +166,7 @@ pub fn build_volume(
         v.sort_unstable();
     }
 
-    let sac = branch_of.iter().map(|&b| crate::mesh::is_sac(&inputs.branch_names[b as usize])).collect();
+    let sac = branch_of.iter().map(|&b| crate::geometry::mesh::is_sac(&inputs.branch_names[b as usize])).collect();
     let mesh = VesselMesh {
         nodes,
         hexes,
@@ -193,7 +196,7 @@ pub fn build_volume(
 }
 
 /// Smooths the transitions' lumen-surface quads on the triangles (see
-/// [`crate::surface_smoothing`]), their rays' ring nodes following.
+/// [`crate::stages::volume::surface_smoothing`]), their rays' ring nodes following.
 fn smooth_transition_surface(
     nodes: &mut [Point3<f64>],
     mut columns: IndexMap<u32, Vec<RayNode>>,
@@ -352,9 +355,9 @@ const STALLED_SWEEPS: usize = 10;
 const STALLED_GAIN: f64 = 0.01;
 /// The bar on the scaled Jacobian: below it, junctions get more sweeps and (when asked)
 /// their walls are optimised.
-pub(crate) const QUALITY_BAR_SJ: f64 = crate::quality::Bars::MIN_SCALED_JACOBIAN;
+pub(crate) const QUALITY_BAR_SJ: f64 = crate::geometry::quality::Bars::MIN_SCALED_JACOBIAN;
 /// The bar on the wall's mean scaled Jacobian (FEA practice wants a mean above 0.8).
-pub(crate) const WALL_MEAN_BAR_SJ: f64 = crate::quality::Bars::WALL_MEAN_SCALED_JACOBIAN;
+pub(crate) const WALL_MEAN_BAR_SJ: f64 = crate::geometry::quality::Bars::WALL_MEAN_SCALED_JACOBIAN;
 
 /// How a branched vessel's junctions are finished; the caller builds the variants and keeps
 /// the best (see `junction_finish::finish_junctions`).
@@ -397,7 +400,7 @@ pub struct JunctionOptimisation {
     /// junction's whole spine; bent ones give room to the branch that needs it.
     pub move_pages: bool,
     /// The transitions' lumen-surface quads are smoothed on the triangles first
-    /// ([`crate::surface_smoothing`]): it lifts the wall's mean, but can lower the worst element.
+    /// ([`crate::stages::volume::surface_smoothing`]): it lifts the wall's mean, but can lower the worst element.
     pub smooth_surface: bool,
 }
 
@@ -452,7 +455,7 @@ fn improve_junction_nodes(
         .map(|&n| {
             let mut nb: Vec<u32> = Vec::new();
             for &e in &incident[&n] {
-                let outer = crate::mesh::face_nodes(&lumen[e], crate::mesh::FACE_OUTER);
+                let outer = crate::geometry::mesh::face_nodes(&lumen[e], crate::geometry::mesh::FACE_OUTER);
                 if let Some(at) = outer.iter().position(|&x| x == n) {
                     nb.push(outer[(at + 1) % 4]);
                     nb.push(outer[(at + 3) % 4]);
@@ -594,7 +597,7 @@ fn add_columns(
     columns: &mut IndexMap<u32, Vec<RayNode>>,
     ids: &[u32],
     template: &SectionTemplate,
-    section: &crate::projection::ProjectedSection,
+    section: &crate::stages::projection::ProjectedSection,
     levels: &RadialLevels,
 ) {
     let (core, m, r_cells) = (template.core_len(), template.ring_len(), levels.lumen_cells());
@@ -731,7 +734,7 @@ fn watch_pyramids(
     for (e, h) in elements.iter().enumerate() {
         if validity[e] != judged
             && h.iter().any(|&n| free[n as usize] != Freedom::Fixed)
-            && crate::quality::face_pyramid_ratio(&h.map(|n| nodes[n as usize])) < below
+            && crate::geometry::quality::face_pyramid_ratio(&h.map(|n| nodes[n as usize])) < below
         {
             validity[e] = judged;
             newly.push(e);
@@ -819,14 +822,14 @@ fn crotch_limited_thickness(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::blocks::graded_levels;
+    use crate::stages::junction::blocks::graded_levels;
 
     /// Only elements with a free node and a pyramid ratio below the threshold are put in sight,
     /// each once, and only when pyramids are judged.
     #[test]
     fn pyramids_are_watched_where_they_are_low_and_a_node_is_free() {
-        let thin = crate::quality::tests::warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]);
-        let square = crate::quality::tests::warped_slab(0.0, [1.0; 4]);
+        let thin = crate::geometry::quality::tests::warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]);
+        let square = crate::geometry::quality::tests::warped_slab(0.0, [1.0; 4]);
         let nodes: Vec<Point3<f64>> = thin.iter().chain(&square).copied().collect();
         let elements: Vec<Hex> = vec![[0, 1, 2, 3, 4, 5, 6, 7], [8, 9, 10, 11, 12, 13, 14, 15]];
         let mut free = vec![Freedom::Free; 16];
@@ -842,9 +845,9 @@ mod tests {
         let mut fresh = vec![Validity::Corners; 2];
         assert!(watch(&free, Validity::CornersAndPyramids, &mut fresh).is_empty(), "no free node");
     }
-    use crate::centerline::CenterlineTree;
-    use crate::config::MeshConfig;
-    use crate::projection::{project_branch, ProjectionSetup};
+    use crate::stages::centerline::CenterlineTree;
+    use crate::data::config::MeshConfig;
+    use crate::stages::projection::{project_branch, ProjectionSetup};
     use crate::testing::{straight_tube_centerline, straight_tube_surface};
 
     /// Two tubes side by side, one with a square core and one with a rectangular core: each
@@ -858,7 +861,7 @@ mod tests {
         let surface = LumenSurface::new(&tube).unwrap();
         let tree = CenterlineTree::build(&straight_tube_centerline(radius, length), &config.centerline, Some(&surface))
             .unwrap();
-        let spacing = |_: &crate::centerline::CenterlineSample| 1.0;
+        let spacing = |_: &crate::stages::centerline::CenterlineSample| 1.0;
         let templates = [SectionTemplate::new(4, 0.5, 3.0), SectionTemplate::rect(4, 2, 0.5, 3.0)];
         let projected: Vec<ProjectedBranch> = templates
             .iter()
@@ -903,10 +906,10 @@ mod tests {
             assert_eq!(of_branch(mesh.wall_range()), intervals * t.ring_len() * w_cells, "branch {b}");
         }
         for e in 0..mesh.hexes.len() {
-            let q = crate::quality::scaled_jacobian(&mesh.corners(e));
+            let q = crate::geometry::quality::scaled_jacobian(&mesh.corners(e));
             assert!(q > 0.2, "element {e} of branch {} has scaled Jacobian {q}", mesh.branch_of[e]);
         }
-        let interface = &mesh.node_sets[crate::mesh::sets::INTERFACE_NODES];
+        let interface = &mesh.node_sets[crate::geometry::mesh::sets::INTERFACE_NODES];
         let per_branch: usize = templates.iter().zip(&projected).map(|(t, p)| t.ring_len() * p.sections.len()).sum();
         assert_eq!(interface.len(), per_branch);
         for &n in interface {

@@ -5,16 +5,16 @@
 //! wall's growth direction).
 //!
 //! The objective is a penalty on the nine terms of Verdict's scaled Jacobian (eight corners
-//! and the centroid, see [`crate::quality`]) and on the six face pyramids that OpenFOAM builds
-//! ([`crate::quality::face_pyramids`]): every term below its target costs its shortfall
+//! and the centroid, see [`crate::geometry::quality`]) and on the six face pyramids that OpenFOAM builds
+//! ([`crate::geometry::quality::face_pyramids`]): every term below its target costs its shortfall
 //! squared, and a negative corner ten times more. It is smooth (where edges do not vanish) and zero
 //! on elements already past the target, so untangling comes first (an inverted corner costs
 //! most) and then shape, every poor corner at once. A max-min objective, raised one node at a
 //! time, stalls where two poor elements share nodes that each wants elsewhere.
 
-use crate::mesh::{Hex, HEX_CORNER_NEIGHBOURS};
-use crate::quality::Validity;
-use crate::surface::LumenSurface;
+use crate::geometry::mesh::{Hex, HEX_CORNER_NEIGHBOURS};
+use crate::geometry::quality::Validity;
+use crate::geometry::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
 
 /// Scaled-Jacobian terms below this are penalised: above the bar (0.2) with a margin, so that
@@ -158,7 +158,7 @@ fn term(
 }
 
 /// The face pyramids' share of [`element_penalty`]: each pyramid ratio
-/// ([`crate::quality::face_pyramids`]) below [`PYRAMID_TARGET`] costs its shortfall, scaled so
+/// ([`crate::geometry::quality::face_pyramids`]) below [`PYRAMID_TARGET`] costs its shortfall, scaled so
 /// that a flat pyramid costs as much as a flat corner, squared. Without it the corners' terms,
 /// blind to an element's thickness, flatten a poor element until its centre leaves a face's
 /// plane (gmsh_bifurcation at medium: a lumen cell at the wall went from a scaled Jacobian of
@@ -168,7 +168,7 @@ fn term(
 fn pyramid_penalty(c: &[Point3<f64>; 8]) -> f64 {
     // A cell without positive volume costs the most on every face, so that turning its volume
     // positive never costs (its corners' terms untangle it).
-    let pyramids = crate::quality::face_pyramids_of_positive_volume(c).unwrap_or([LEAST_PYRAMID; 6]);
+    let pyramids = crate::geometry::quality::face_pyramids_of_positive_volume(c).unwrap_or([LEAST_PYRAMID; 6]);
     pyramids
         .iter()
         .map(|r| {
@@ -207,7 +207,7 @@ pub fn optimise_nodes(
         for &e in &incident[n as usize] {
             if size[e as usize] == 0.0 {
                 let h = &elements[e as usize];
-                size[e as usize] = crate::mesh::HEX_EDGES
+                size[e as usize] = crate::geometry::mesh::HEX_EDGES
                     .iter()
                     .map(|&[a, b]| (nodes[h[a] as usize] - nodes[h[b] as usize]).norm())
                     .sum::<f64>()
@@ -362,7 +362,7 @@ fn shortest_edge(nodes: &[Point3<f64>], elements: &[Hex], incident: &[u32], n: u
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::quality::scaled_jacobian;
+    use crate::geometry::quality::scaled_jacobian;
 
     /// A surface the tests' nodes never slide on.
     fn surface() -> LumenSurface {
@@ -410,7 +410,7 @@ mod tests {
         inverted[6] = Point3::new(0.1, 0.2, 0.15);
         let mut collapsed = sheared;
         collapsed[7] = collapsed[6];
-        let slab = crate::quality::tests::warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]);
+        let slab = crate::geometry::quality::tests::warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]);
         for (name, c) in
             [("cube", cube), ("sheared", sheared), ("inverted", inverted), ("collapsed", collapsed), ("slab", slab)]
         {
@@ -479,16 +479,16 @@ mod tests {
     /// part of the objective.
     #[test]
     fn free_nodes_lift_a_negative_face_pyramid() {
-        let slab = crate::quality::tests::warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]);
-        assert!(scaled_jacobian(&slab) > TARGET && crate::quality::face_pyramid_ratio(&slab) < 0.0);
+        let slab = crate::geometry::quality::tests::warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]);
+        assert!(scaled_jacobian(&slab) > TARGET && crate::geometry::quality::face_pyramid_ratio(&slab) < 0.0);
         let mut nodes = slab.to_vec();
         let hexes: Vec<Hex> = vec![[0, 1, 2, 3, 4, 5, 6, 7]];
         let mut freedom = vec![Freedom::Fixed; 8];
         freedom[4..].fill(Freedom::Free);
         optimise_nodes(&mut nodes, &hexes, &freedom, &surface(), &[Validity::CornersAndPyramids]);
         let c = hexes[0].map(|n| nodes[n as usize]);
-        let pyramids = crate::quality::face_pyramids(&c);
-        assert!(crate::quality::validity(&c) > 0.2 && pyramids.iter().all(|&r| r > 0.05), "{pyramids:?}");
+        let pyramids = crate::geometry::quality::face_pyramids(&c);
+        assert!(crate::geometry::quality::validity(&c) > 0.2 && pyramids.iter().all(|&r| r > 0.05), "{pyramids:?}");
     }
 
     /// A node that may only move across a direction keeps its place along it.

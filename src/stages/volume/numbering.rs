@@ -3,12 +3,12 @@
 //! the wall nodes above each lumen-surface node.
 
 use super::{add_columns, JunctionOptimisation, RadialLevels};
-use crate::blocks::SectionTemplate;
-use crate::junction::{FoldKey, JunctionGeometry};
-use crate::mesh::Hex;
-use crate::node_optimisation::Freedom;
-use crate::projection::{BranchEnd, DomeTop, ProjectedBranch};
-use crate::surface_smoothing::RayNode;
+use crate::stages::junction::blocks::SectionTemplate;
+use crate::stages::junction::{FoldKey, JunctionGeometry};
+use crate::geometry::mesh::Hex;
+use crate::stages::volume::node_optimisation::Freedom;
+use crate::stages::projection::{BranchEnd, DomeTop, ProjectedBranch};
+use crate::stages::volume::surface_smoothing::RayNode;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use std::collections::HashMap;
@@ -68,7 +68,7 @@ impl LumenNodes {
 pub(super) struct BranchNodes {
     /// Per station: (N+1)^2 core ids then R * ring ids.
     pub stations: Vec<Vec<u32>>,
-    /// A dome's top grid (see [`crate::projection::DomeTop`]): per lumen level 0..=R, the ids of
+    /// A dome's top grid (see [`crate::stages::projection::DomeTop`]): per lumen level 0..=R, the ids of
     /// the core grid's nodes; level 0 is the last station's core, the boundary of level l its
     /// ring level l.
     pub dome_top: Option<Vec<Vec<u32>>>,

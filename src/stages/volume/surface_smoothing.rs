@@ -16,8 +16,8 @@
 //! gmsh_aortic_arch 0.870 -> 0.884, gmsh_aortic_arch_cm 0.857 -> 0.875,
 //! palabos_cerebral_aneurysm 0.889 -> 0.898, sphinxsys_aortic_arch 0.832 -> 0.840.
 
-use crate::mesh::Hex;
-use crate::surface::LumenSurface;
+use crate::geometry::mesh::Hex;
+use crate::geometry::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
 
 /// Gauss-Seidel passes of the smoothing. Measured on the cohort at coarse, from the bare surface:
@@ -108,7 +108,7 @@ const SKEW_WEIGHT: f64 = 0.5;
 /// or below where it stood if it was lower: the objective does not see the elements' validity
 /// (palabos_cerebral_aneurysm at coarse, unguarded: a lumen cell of the sac's junction
 /// inverted, and the vessel was refused).
-const LUMEN_FLOOR: f64 = crate::node_optimisation::TARGET;
+const LUMEN_FLOOR: f64 = crate::stages::volume::node_optimisation::TARGET;
 /// The shape optimisation's difference step, first trial step and largest step, as shares of
 /// the node's shortest surface edge, and its halvings of the step before a node stays.
 const GRADIENT_STEP: f64 = 1e-6;
@@ -128,7 +128,7 @@ fn place(nodes: &mut [Point3<f64>], s: &SmoothedNode, p: Point3<f64>) {
 /// element grown from the quad has about its worst corner's sine as scaled Jacobian. A corner
 /// with an edge of no length, or a quad with no area, counts as flat (0).
 fn corner_sines(q: &[Point3<f64>; 4]) -> [f64; 4] {
-    let normal = crate::mesh::quad_area_vector(*q);
+    let normal = crate::geometry::mesh::quad_area_vector(*q);
     let n = normal.norm();
     if n <= f64::MIN_POSITIVE {
         return [0.0; 4];
@@ -162,7 +162,7 @@ fn shape_objective(nodes: &[Point3<f64>], s: &SmoothedNode, lumen: &[Hex]) -> f6
         .iter()
         .map(|&e| &lumen[e as usize])
         .filter(|h| h.contains(&s.node))
-        .map(|h| crate::quality::equiangle_skew(&h.map(|n| nodes[n as usize])).powi(2))
+        .map(|h| crate::geometry::quality::equiangle_skew(&h.map(|n| nodes[n as usize])).powi(2))
         .sum();
     quads + SKEW_WEIGHT * skew
 }
@@ -192,7 +192,7 @@ impl Shaping<'_> {
         }
         let lumen = self.lumen;
         let measure = |nodes: &[Point3<f64>], e: u32| {
-            crate::quality::scaled_jacobian(&lumen[e as usize].map(|n| nodes[n as usize]))
+            crate::geometry::quality::scaled_jacobian(&lumen[e as usize].map(|n| nodes[n as usize]))
         };
         let floor: Vec<f64> = s
             .elements
@@ -333,7 +333,7 @@ mod tests {
                 let low = q.map(|n| n + 1);
                 let hex = [low[0], low[1], low[2], low[3], q[0], q[1], q[2], q[3]];
                 let turned = [low[0], low[3], low[2], low[1], q[0], q[3], q[2], q[1]];
-                let sj = |h: &Hex| crate::quality::scaled_jacobian(&h.map(|n| nodes[n as usize]));
+                let sj = |h: &Hex| crate::geometry::quality::scaled_jacobian(&h.map(|n| nodes[n as usize]));
                 if sj(&hex) > 0.0 {
                     hex
                 } else {
@@ -343,7 +343,7 @@ mod tests {
             .collect();
         let floor: Vec<f64> = hexes
             .iter()
-            .map(|h| crate::quality::scaled_jacobian(&h.map(|n| nodes[n as usize])).min(LUMEN_FLOOR))
+            .map(|h| crate::geometry::quality::scaled_jacobian(&h.map(|n| nodes[n as usize])).min(LUMEN_FLOOR))
             .collect();
         let neighbours = vec![at(1, 3).0, at(3, 3).0, at(2, 2).0, at(2, 4).0];
         let column = vec![RayNode { node: below, origin, share: 0.5 }];
@@ -363,7 +363,7 @@ mod tests {
         assert!(surface.closest(&p).distance < 1e-9, "the node stays on the triangles");
         assert!((nodes[below as usize] - (origin + (p - origin) * 0.5)).norm() < 1e-12, "its column follows");
         for (h, least) in hexes.iter().zip(&floor) {
-            assert!(crate::quality::scaled_jacobian(&h.map(|n| nodes[n as usize])) >= *least);
+            assert!(crate::geometry::quality::scaled_jacobian(&h.map(|n| nodes[n as usize])) >= *least);
         }
     }
 }

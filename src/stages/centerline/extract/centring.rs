@@ -12,7 +12,7 @@
 //! Only where the section is the vessel's own: near a junction, a sac or an open end, the normal
 //! plane runs into another vessel or out of the lumen, and its deepest point belongs to that.
 
-use crate::surface::LumenSurface;
+use crate::geometry::surface::LumenSurface;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
@@ -85,7 +85,7 @@ fn interpolate(keys: &[usize], key_shifts: &[Vector3<f64>], s: &[f64]) -> Vec<Ve
 /// would zig-zag.
 fn deepest_in_section(p: &Point3<f64>, tangent: &Vector3<f64>, radius: f64, lumen: &LumenSurface) -> Vector3<f64> {
     let Some(t) = tangent.try_normalize(0.0) else { return Vector3::zeros() };
-    let e1 = crate::centerline::any_perpendicular(&t);
+    let e1 = crate::geometry::vector::any_perpendicular(&t);
     let e2 = t.cross(&e1);
     let direction = |k: usize| {
         let a = std::f64::consts::TAU * k as f64 / RAYS as f64;

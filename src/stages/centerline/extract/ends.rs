@@ -1,8 +1,8 @@
 //! Finding a vessel's ends: flat caps (tagged by a cell array, or found as planar discs with a
 //! sharp rim), open boundary loops, and points given by the user.
 
-use crate::input::topology::{boundary_loops, loop_centre_and_area, triangle_neighbours, BOUNDARY, NON_MANIFOLD};
-use crate::input::NamedCap;
+use crate::io::input::topology::{boundary_loops, loop_centre_and_area, triangle_neighbours, BOUNDARY, NON_MANIFOLD};
+use crate::io::input::NamedCap;
 use nalgebra::{Point3, Vector3};
 use std::collections::BTreeMap;
 
@@ -159,7 +159,7 @@ fn planar_regions(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<(Vec<
 }
 
 /// The caps given in files of their own and joined to the wall (their triangles tagged, see
-/// [`crate::input::CAP_TAGS`]), each an end at its rim's centre whatever its shape.
+/// [`crate::io::input::CAP_TAGS`]), each an end at its rim's centre whatever its shape.
 pub fn tagged_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: &[i64], given: &[NamedCap]) -> Vec<Cap> {
     given
         .iter()

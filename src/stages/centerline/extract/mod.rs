@@ -1,6 +1,6 @@
 //! Centerlines from the lumen surface alone: the vessel's ends, the inlet, and one polyline
 //! from the inlet to every outlet carrying the maximal inscribed sphere radius, written as
-//! VMTK-compatible polydata ([`write_vtp`]) or handed straight to the mesher.
+//! VMTK-compatible polydata ([`crate::writers::centerlines::write_vtp`]) or handed straight to the mesher.
 //!
 //! # Method: shortest paths through maximal balls
 //!
@@ -57,15 +57,13 @@ mod sampling;
 mod split;
 
 mod voronoi;
-mod vtp;
 
 pub use ends::{find_caps, names_of_ends, Cap, EndKind, Hole, InletChoice, VesselEnd, CAP_SPAN, END_SPAN};
 pub use split::branch_split;
-pub use vtp::{write_branch_split, write_vtp};
 
-use crate::error::{Error, Result};
-use crate::input::{topology, CenterlinePolyline, Centerlines, NamedCap, TriangleSurface};
-use crate::surface::LumenSurface;
+use crate::data::error::{Error, Result};
+use crate::io::input::{topology, CenterlinePolyline, Centerlines, NamedCap, TriangleSurface};
+use crate::geometry::surface::LumenSurface;
 use indexmap::IndexMap;
 use medial::{Ball, BallGraph};
 use nalgebra::{Point3, Vector3};
@@ -103,7 +101,7 @@ pub struct ExtractOptions {
     /// Points near the domes of saccular aneurysms the search does not take as sacs: ends of kind
     /// [`EndKind::Sac`] (meshed as blind branches closed by a dome).
     pub sacs: Vec<Point3<f64>>,
-    /// Caps given in files of their own (see [`crate::input::read_surface_parts`]): each joined
+    /// Caps given in files of their own (see [`crate::io::input::read_surface_parts`]): each joined
     /// one (tagged) is an end whatever its shape, in place of the flat caps the search would
     /// find, and every one names the end it closes or covers.
     pub caps: Vec<NamedCap>,

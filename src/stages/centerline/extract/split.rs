@@ -11,8 +11,8 @@
 //! the region VMTK blanks (from the touching sphere to the tube exit) to within a fraction of a
 //! radius, and it keeps the centre inside the blanked tract, so a reader can find it again.
 
-use crate::centerline::{Branch, CenterlineTree};
-use crate::input::{CenterlinePolyline, Centerlines};
+use crate::stages::centerline::{Branch, CenterlineTree};
+use crate::io::input::{CenterlinePolyline, Centerlines};
 use indexmap::IndexMap;
 use std::path::Path;
 
@@ -50,7 +50,7 @@ pub fn branch_split(tree: &CenterlineTree, source: &Path) -> Centerlines {
         }
         chain.reverse();
         let mut tract = 0;
-        let mut push = |samples: Vec<&crate::centerline::CenterlineSample>, blanked: bool, group: i64| {
+        let mut push = |samples: Vec<&crate::stages::centerline::CenterlineSample>, blanked: bool, group: i64| {
             let mut cell_tags = IndexMap::new();
             cell_tags.insert("CenterlineIds".to_string(), centerline as i64);
             cell_tags.insert("TractIds".to_string(), tract);

@@ -2,9 +2,11 @@
 //! point data `MaximumInscribedSphereRadius` (and `ParallelTransportNormals` when every polyline
 //! has normals), every integer cell tag (`CenterlineIds`, `GroupIds`...) as cell data.
 
-use crate::error::Result;
-use crate::input::Centerlines;
-use crate::writers::write_atomic;
+use crate::data::error::Result;
+use crate::io::input::Centerlines;
+use crate::io::atomic::write_atomic;
+use crate::stages::centerline::extract::{branch_split, Extraction};
+use crate::stages::centerline::CenterlineTree;
 use std::path::Path;
 
 /// Writes `centerlines` (millimetres) to `path`, lengths multiplied by `scale` (1 for mm).
@@ -79,13 +81,13 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
 /// the tree's branch-split variant ([`super::branch_split`]) to `path`, lengths multiplied by
 /// `scale`. Returns the tree.
 pub fn write_branch_split(
-    extraction: &super::Extraction,
+    extraction: &Extraction,
     scale: f64,
     path: &Path,
-) -> Result<crate::centerline::CenterlineTree> {
+) -> Result<CenterlineTree> {
     let start = extraction.centerlines.polylines.first().map(|l| l.points[0]);
-    let config = crate::config::CenterlineConfig { inlet_mm: start.map(|p| p.coords.into()), ..Default::default() };
-    let tree = crate::centerline::CenterlineTree::build(&extraction.centerlines, &config, None)?;
-    write_vtp(&super::branch_split(&tree, path), scale, path)?;
+    let config = crate::data::config::CenterlineConfig { inlet_mm: start.map(|p| p.coords.into()), ..Default::default() };
+    let tree = CenterlineTree::build(&extraction.centerlines, &config, None)?;
+    write_vtp(&branch_split(&tree, path), scale, path)?;
     Ok(tree)
 }

@@ -1,0 +1,351 @@
+//! The retry and fallback policies of the pipeline, in one place. Each meshes the vessel again,
+//! another way, when the first is refused or short of a quality bar, and keeps the better mesh
+//! (the first of equals), judged as a junction's finishes are ([`FinishQuality`]):
+//!
+//! - **books, then sectors** ([`books_then_sectors`]): a junction of four or more branches is
+//!   laid out as a book first, then in sectors;
+//! - **merged junctions' centres** ([`mesh_vessel_laid_out`], [`MERGED_CENTRE_AT`]): two
+//!   junctions whose blocks would overlap become one, centred at each place in turn;
+//! - **coarser junction spacing** ([`coarser_junctions`]): a vessel with merged junctions, or one
+//!   refused as asked, has its junctions spaced as at the coarse preset;
+//! - **recentring close merges** ([`recentre_close_merges`]): junctions merged for being close
+//!   are centred elsewhere when their mesh is refused or short of a bar;
+//! - **finishes** ([`junction_finish`]): the volume built with several junction optimisations
+//!   and walls, the best kept;
+//! - **leaving out what cannot be meshed** ([`mesh_dropping_what_fails`]): a sac found on the
+//!   surface, or a branch too short for its junction, is left out and said, the rest meshed.
+
+pub mod junction_finish;
+
+use crate::data::config::MeshConfig;
+use crate::data::diagnostics::Warning;
+use crate::data::error::{Error, Result};
+use crate::geometry::surface::{LumenSurface, TriangleSurface};
+use crate::io::input::Centerlines;
+use crate::pipeline::checks::name_winding;
+use crate::pipeline::progress::Progress;
+use crate::pipeline::{mesh_tree, mesh_vessel};
+use crate::stages::annotation::Meshed;
+use crate::stages::centerline::{CenterlineTree, ForcedMerge};
+use crate::stages::junction::{analyse_junctions, find_junction_overlap, unanalysable_close_junction, LayoutPolicy};
+use junction_finish::FinishQuality;
+use nalgebra::Point3;
+
+/// Meshes a vessel with its junctions laid out as books first: a straight spine shared by
+/// every branch is the best-shaped fold where it orders the branches. A vessel refused so, or
+/// short of a bar, with a junction of four or more branches is meshed again with that junction
+/// in sectors, and the better mesh kept (the first of equals; judged as a junction's finishes
+/// are).
+pub(crate) fn books_then_sectors(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    progress: &mut Progress,
+) -> Result<Meshed> {
+    let books = LayoutPolicy::books_only();
+    let meshed = mesh_vessel_laid_out(surface, lumen_surface, centerlines, config, &books, progress);
+    let within_bars = |m: &Meshed| FinishQuality::of_mesh(&m.mesh).meets_bars();
+    if meshed.as_ref().is_ok_and(within_bars) || !books.sectors_differ.get() {
+        return meshed;
+    }
+    let sectors = LayoutPolicy::with_sectors();
+    let laid_out = mesh_vessel_laid_out(surface, lumen_surface, centerlines, config, &sectors, progress);
+    match (meshed, laid_out) {
+        (Ok(a), Ok(b)) => {
+            Ok(if FinishQuality::of_mesh(&b.mesh).better_than(&FinishQuality::of_mesh(&a.mesh)) { b } else { a })
+        }
+        (Ok(a), Err(_)) => Ok(a),
+        (Err(_), Ok(b)) => Ok(b),
+        (Err(_), Err(e)) => Err(e),
+    }
+}
+
+/// Meshes the vessel; when it is refused, leaves out what the centerline extraction found and
+/// cannot be meshed, and meshes the rest (`extracted`: the centerlines were found on the
+/// surface, not given): the sacs (a `sac_not_meshed` warning in `warnings`), or a branch that
+/// ends too close to its junction for the junction's transition (returned with its far end, mm,
+/// and the refusal, for its cap to be opened in the side of the mesh). A refusal of a surface
+/// wound inconsistently names the winding. Returns the mesh, the centerlines it was built on and
+/// the short branches left out.
+#[allow(clippy::type_complexity)]
+pub(crate) fn mesh_dropping_what_fails(
+    surface: &TriangleSurface,
+    centerlines: Centerlines,
+    tree_config: &MeshConfig,
+    extracted: bool,
+    warnings: &mut Vec<Warning>,
+    progress: &mut Progress,
+) -> Result<(Meshed, Centerlines, Vec<([f64; 3], String)>)> {
+    let mut short_branches = vec![];
+    let attempt = mesh_vessel(surface, &centerlines, tree_config, progress);
+    let (meshed, centerlines) = match attempt {
+        Ok(meshed) => (meshed, centerlines),
+        // Sacs found on the surface never cost the vessel: refused with them, it is meshed
+        // without them, and each is said not meshed (a warning, report.json's ends, exit 3).
+        Err(e) if extracted && !tree_config.centerline.sacs_mm.is_empty() => {
+            let sacs = &tree_config.centerline.sacs_mm;
+            warnings.push(Warning::new(
+                "sac_not_meshed",
+                format!("the vessel is meshed without its sac(s); with them: {e}"),
+            ));
+            let centerlines = without_paths_to(&centerlines, sacs);
+            let config = MeshConfig {
+                centerline: crate::data::config::CenterlineConfig { sacs_mm: vec![], ..tree_config.centerline.clone() },
+                ..tree_config.clone()
+            };
+            let meshed =
+                mesh_vessel(surface, &centerlines, &config, progress).map_err(|e| name_winding(e, surface))?;
+            (meshed, centerlines)
+        }
+        // A branch found on the surface that ends too close to its junction for the junction's
+        // transition (a short capped stub in an aorto-iliac's crotch) does not cost the rest: the
+        // vessel is meshed without it, its stretch meshed with its neighbour's lumen, and its
+        // cap opened in the side of the mesh (see `crate::stages::additions::side_ends`).
+        Err(Error::ShortBranch { message, end_mm }) if extracted && centerlines.polylines.len() > 2 => {
+            let centerlines = without_paths_to(&centerlines, &[end_mm]);
+            short_branches.push((end_mm, message));
+            let meshed =
+                mesh_vessel(surface, &centerlines, tree_config, progress).map_err(|e| name_winding(e, surface))?;
+            (meshed, centerlines)
+        }
+        Err(e) => return Err(name_winding(e, surface)),
+    };
+    Ok((meshed, centerlines, short_branches))
+}
+
+/// [`mesh_vessel`] with the junctions' arrangements `policy` allows.
+pub(super) fn mesh_vessel_laid_out(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    policy: &LayoutPolicy,
+    progress: &mut Progress,
+) -> Result<Meshed> {
+    progress.stage("centerline");
+    let tree = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))?;
+    // A junction no book orders and another within two of its radii are one junction in fact:
+    // merged (with sectors allowed too, where the merged junction may be laid out in them).
+    let overlap = match analyse_junctions(&tree, lumen_surface, policy) {
+        Ok(junctions) => policy
+            .sectors
+            .then(|| unanalysable_close_junction(&tree, lumen_surface))
+            .flatten()
+            .or_else(|| find_junction_overlap(&tree, &junctions, lumen_surface)),
+        Err(e) => Some(unanalysable_close_junction(&tree, lumen_surface).ok_or(e)?),
+    };
+    let coarser = coarser_junctions(config, centerlines);
+    let Some(overlap) = overlap else {
+        let close_merges = tree.close_merges.clone();
+        let meshed =
+            mesh_tree_recentred(surface, lumen_surface, tree, centerlines, config, &close_merges, policy, progress);
+        let (Err(Error::Geometry(refusal)), Some(coarser)) = (&meshed, coarser) else { return meshed };
+        let tree = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))?;
+        let mut retried =
+            mesh_tree_recentred(surface, lumen_surface, tree, centerlines, &coarser, &close_merges, policy, progress)
+                .map_err(|_| Error::Geometry(refusal.clone()))?;
+        retried.notes.push(junction_spacing_note(
+            config,
+            &format!("at {} they were refused: {refusal}", config.lumen.axial_spacing),
+        ));
+        return Ok(retried);
+    };
+    // Two junctions overlap: they become one, centred on the branch between them. Where along
+    // it depends on the branches around (the middle of the merged junction is neither end), so
+    // each place of MERGED_CENTRE_AT is meshed and the best mesh kept (judged as a junction's
+    // finishes are, on the whole mesh), the first of equals. Its transitions sweep between two
+    // junctions' folds, so they are spaced as at the coarse preset (see `coarser_junctions`).
+    let merged_config = coarser.as_ref().unwrap_or(config);
+    let segment = tree.segments[overlap.branch];
+    let mut best: Option<(Meshed, FinishQuality)> = None;
+    let mut first_error = None;
+    for at in MERGED_CENTRE_AT {
+        let attempt = merged_tree(centerlines, merged_config, lumen_surface, segment, at, policy).and_then(|tree| {
+            mesh_tree(surface, lumen_surface, tree, &centerlines.source, merged_config, false, policy, progress)
+        });
+        match attempt {
+            Ok(meshed) => {
+                let quality = FinishQuality::of_mesh(&meshed.mesh);
+                let meets_bars = quality.meets_bars();
+                if best.as_ref().is_none_or(|(_, b)| quality.better_than(b)) {
+                    best = Some((meshed, quality));
+                }
+                // The first place within the bars is kept: each costs a whole mesh.
+                if meets_bars {
+                    break;
+                }
+            }
+            Err(e) => {
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    match (best, first_error) {
+        (Some((mut meshed, _)), _) => {
+            if coarser.is_some() {
+                let why = format!(
+                    "{} were merged into one junction, as their blocks would overlap, and a merged junction's \
+                     transitions sweep between both junctions' folds, where thinner sections cross (set \
+                     lumen.junction_axial_spacing to space them otherwise)",
+                    overlap.place
+                );
+                meshed.notes.push(junction_spacing_note(config, &why));
+            }
+            Ok(meshed)
+        }
+        (None, Some(e)) => {
+            let tried = format!(
+                "(vesselhex merged {} into one junction there, as their blocks would overlap, and tried centring it \
+                 {} of the way along the branch between them; none meshed)",
+                overlap.place,
+                MERGED_CENTRE_AT.map(|a| a.to_string()).join(", ")
+            );
+            Err(match e {
+                Error::ShortBranch { message, end_mm } => {
+                    Error::ShortBranch { message: format!("{message} {tried}"), end_mm }
+                }
+                e => Error::Geometry(format!("{e} {tried}")),
+            })
+        }
+        (None, None) => unreachable!("every place was tried"),
+    }
+}
+
+/// The coarse preset's axial spacing, relative to the radius: what [`coarser_junctions`] spaces
+/// the junctions at.
+pub(super) const COARSE_JUNCTION_SPACING: f64 = 0.5;
+
+/// The settings with a branched vessel's junction transitions and bridges spaced at the coarse
+/// preset's spacing (the rest as asked), when they ask a finer spacing relative to the radius
+/// and none for the junctions; None otherwise. [`mesh_vessel`] meshes with them a vessel whose
+/// junctions were merged (their transitions sweep between two junctions' folds over a spine up
+/// to twice as long) and one refused with the settings as given. A transition's sections are
+/// swept between curved folds, not cut by planes, and thin ones cross each other:
+/// sphinxsys_aortic_arch at medium (0.3 radii) had 285 elements inverted around its arch's
+/// bridge, and 0.4 and 0.45 were refused too; at 0.5 it meets the bars, and the two Gmsh arches
+/// (merged junctions too) stay within them in about half the time (0.90 -> 0.43 s, 2.25 -> 1.28 s).
+pub(super) fn coarser_junctions(config: &MeshConfig, centerlines: &Centerlines) -> Option<MeshConfig> {
+    let l = &config.lumen;
+    let finer = centerlines.polylines.len() > 1
+        && l.junction_axial_spacing.is_none()
+        && l.axial_spacing_mm.is_none()
+        && l.axial_spacing < COARSE_JUNCTION_SPACING;
+    finer.then(|| {
+        let lumen = crate::data::config::LumenConfig { junction_axial_spacing: Some(COARSE_JUNCTION_SPACING), ..l.clone() };
+        MeshConfig { lumen, ..config.clone() }
+    })
+}
+
+/// The `junction_spacing` warning: the junctions spaced at the coarse preset's spacing, `why`.
+pub(super) fn junction_spacing_note(config: &MeshConfig, why: &str) -> Warning {
+    Warning::new(
+        "junction_spacing",
+        format!(
+            "the junctions' transitions and bridges are spaced at {COARSE_JUNCTION_SPACING} radii (the coarse \
+             preset's; lumen.junction_axial_spacing), the rest of the vessel at {} as asked: {why}",
+            config.lumen.axial_spacing
+        ),
+    )
+}
+
+/// A tree meshed ([`mesh_tree`]); one whose close junctions were merged and whose mesh is short
+/// of a bar or refused is meshed again with them centred elsewhere ([`recentre_close_merges`]).
+pub(super) fn mesh_tree_recentred(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    tree: CenterlineTree,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    close_merges: &[usize],
+    policy: &LayoutPolicy,
+    progress: &mut Progress,
+) -> Result<Meshed> {
+    let meshed = mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, true, policy, progress);
+    if close_merges.is_empty() || meshed.as_ref().is_ok_and(|m| FinishQuality::of_mesh(&m.mesh).meets_bars()) {
+        return meshed;
+    }
+    recentre_close_merges(surface, lumen_surface, centerlines, config, meshed, close_merges, policy, progress)
+}
+
+/// A tree whose close junctions were merged (see `CenterlineConfig::junction_merge_radii`),
+/// short of a bar or refused with the merged junctions at their upstream centres: each place of
+/// [`MERGED_CENTRE_AT`] along the merged segments is meshed, and the best mesh kept (`meshed`,
+/// the first, wins ties), as for overlapping junctions. gmsh_cerebral_aneurysm at medium, its
+/// sac leaving where a side branch does: 0.187 at the upstream centre, 0.240 at 5/8.
+pub(super) fn recentre_close_merges(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    meshed: Result<Meshed>,
+    close_merges: &[usize],
+    policy: &LayoutPolicy,
+    progress: &mut Progress,
+) -> Result<Meshed> {
+    let mut best = meshed.as_ref().ok().map(|m| FinishQuality::of_mesh(&m.mesh));
+    let mut kept = meshed;
+    for at in MERGED_CENTRE_AT {
+        let forced: Vec<ForcedMerge> = close_merges.iter().map(|&segment| ForcedMerge { segment, at }).collect();
+        let attempt = CenterlineTree::build_merging(centerlines, &config.centerline, Some(lumen_surface), &forced)
+            .and_then(|tree| {
+                mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, false, policy, progress)
+            });
+        let Ok(meshed) = attempt else { continue };
+        let quality = FinishQuality::of_mesh(&meshed.mesh);
+        if best.as_ref().is_none_or(|b| quality.better_than(b)) {
+            let meets_bars = quality.meets_bars();
+            (best, kept) = (Some(quality), Ok(meshed));
+            // The first place within the bars is kept: each costs a whole mesh.
+            if meets_bars {
+                break;
+            }
+        }
+    }
+    kept
+}
+
+/// Where the junction merged from two overlapping ones is centred: fractions of the branch
+/// between them from the upstream one. Measured on gmsh_aortic_arch (the brachiocephalic-carotid
+/// trunk, whose arch-side crotch lies past its far end): all three mesh at the coarse preset,
+/// only 7/8 at the medium one, 1/2 at neither.
+pub(super) const MERGED_CENTRE_AT: [f64; 3] = [0.625, 0.75, 0.875];
+
+/// At most this many pairs of overlapping junctions are merged in one vessel.
+pub(super) const MAX_FORCED_MERGES: usize = 4;
+
+/// The tree with the junction at the end of `segment` merged into the upstream one (centred
+/// the fraction `at` along it), and any pair that overlaps after that merged too.
+pub(super) fn merged_tree(
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    surface: &LumenSurface,
+    segment: usize,
+    at: f64,
+    policy: &LayoutPolicy,
+) -> Result<CenterlineTree> {
+    let mut forced = vec![ForcedMerge { segment, at }];
+    loop {
+        let tree = CenterlineTree::build_merging(centerlines, &config.centerline, Some(surface), &forced)?;
+        let junctions = analyse_junctions(&tree, surface, policy)?;
+        let Some(overlap) = find_junction_overlap(&tree, &junctions, surface) else { return Ok(tree) };
+        let next = tree.segments[overlap.branch];
+        if forced.len() >= MAX_FORCED_MERGES || forced.iter().any(|f| f.segment == next) {
+            return Err(overlap.error);
+        }
+        forced.push(ForcedMerge { segment: next, at });
+    }
+}
+
+/// The centerlines without the paths to `points`: for each point, the polyline whose last point
+/// lies nearest it (the extraction's paths end at their ends' centres).
+pub(super) fn without_paths_to(centerlines: &Centerlines, points: &[[f64; 3]]) -> Centerlines {
+    let lines = &centerlines.polylines;
+    let gap = |k: usize, p: &[f64; 3]| lines[k].points.last().map_or(f64::INFINITY, |q| (q - Point3::from(*p)).norm());
+    let dropped: Vec<usize> =
+        points.iter().filter_map(|p| (0..lines.len()).min_by(|&a, &b| gap(a, p).total_cmp(&gap(b, p)))).collect();
+    Centerlines {
+        polylines: (0..lines.len()).filter(|k| !dropped.contains(k)).map(|k| lines[k].clone()).collect(),
+        source: centerlines.source.clone(),
+    }
+}
