@@ -54,8 +54,8 @@ pub struct LayoutPolicy {
     /// Sectors at every junction of four or more branches that has a sector layout; otherwise
     /// books only, and a junction no book orders is refused.
     pub sectors: bool,
-    /// Set, with `sectors` off, when a junction of four or more branches has a sector layout:
-    /// meshing again with sectors gives another mesh.
+    /// Set, with `sectors` off, when a junction of four or more branches has a sector layout,
+    /// or a book was refused: meshing again with sectors allowed gives another mesh.
     pub sectors_differ: std::cell::Cell<bool>,
 }
 
@@ -522,6 +522,7 @@ fn analyse_junction(
         return sectors_geometry(index, x, r_x, &members, &directions, &radii, &sectors, surface, &where_);
     }
     if members.len() > MAX_BOOK_BRANCHES {
+        policy.sectors_differ.set(true);
         return Err(Error::Geometry(format!(
             "{}: {} has {} branches; at most {MAX_BOOK_BRANCHES} can share one book of pages",
             surface.source.display(),
@@ -529,9 +530,10 @@ fn analyse_junction(
             members.len()
         )));
     }
-    // With sectors allowed, a bifurcation's book is meshed however narrow its pages (there is no
-    // other arrangement of three branches), and the elements decide.
-    if gap.to_degrees() < MIN_ANGULAR_GAP_DEG && !(policy.sectors && members.len() == 3) {
+    // With sectors allowed, a book no sectors replace (a bifurcation's: there is no other
+    // arrangement of three branches) is meshed however narrow its pages, and the elements decide.
+    if gap.to_degrees() < MIN_ANGULAR_GAP_DEG && !policy.sectors {
+        policy.sectors_differ.set(true);
         return Err(Error::Geometry(format!(
             "{}: {}: the branches cannot be ordered around a common axis (the best axis leaves only {:.1} degrees \
              between two branches, at least {MIN_ANGULAR_GAP_DEG} are needed): the junction is strongly non-planar",

@@ -405,6 +405,25 @@ pub fn project_branch(
             )));
         }
     };
+    // A section that closes neither from the centerline nor from inside the lumen, in the half
+    // of the branch towards a vessel end, lies in a plane that crosses the end's opening (the
+    // vessel bends just before it): the mesh stops short of it on that side, at the next clean
+    // section (an end cut well short is said by its warning).
+    let closes = |i: usize, p: &Probe| p.valid() || recentred_section(template, surface, &samples[i], orient).0.valid();
+    let (mut i0, mut i1) = (i0, i1);
+    let half = 0.5 * length;
+    if start_junction.is_none() {
+        let bad = probes.iter().rev().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s < half && !closes(*i, p));
+        if let Some(next) = bad.and_then(|&(b, _)| probes.iter().find(|(i, _)| *i > b && clean[*i]).map(|c| c.0)) {
+            i0 = next.min(i1);
+        }
+    }
+    if end_junction.is_none() {
+        let bad = probes.iter().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s >= half && !closes(*i, p));
+        if let Some(prev) = bad.and_then(|&(b, _)| probes.iter().rev().find(|(i, _)| *i < b && clean[*i]).map(|c| c.0)) {
+            i1 = prev.max(i0);
+        }
+    }
     // A closed end keeps a margin from its cap, unless the sections were turned into the cap's
     // plane (they run parallel to it, clear of it).
     let r0 = samples[i0].radius;
@@ -420,10 +439,7 @@ pub fn project_branch(
     // Between the ends, a section that does not close from the centerline may from inside the
     // lumen (see `recentred_section`).
     if let Some((bad, p)) = probes.iter().find(|(i, p)| {
-        samples[*i].s >= samples[i0].s.min(s_start)
-            && samples[*i].s <= samples[i1].s.max(s_end)
-            && !p.valid()
-            && !recentred_section(template, surface, &samples[*i], orient).0.valid()
+        samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !closes(*i, p)
     }) {
         return Err(Error::Geometry(format!(
             "{}: the cross-section of branch {name} {} does not close: {} of {} rays miss the lumen surface and {} \
