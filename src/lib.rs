@@ -15,16 +15,16 @@
 //! 7. on top: [`batch`] (many vessels, a process each), [`testing`] and the synthetic vessels
 //!    ([`synthetic`], [`synthetic_branching`]); the command line (`main.rs`) and the Python
 //!    package (`python/`) call the pipeline.
+pub mod batch;
 pub mod data;
 pub mod geometry;
 pub mod io;
-pub mod stages;
-pub mod writers;
 pub mod pipeline;
-pub mod batch;
+pub mod stages;
 pub mod synthetic;
 pub mod synthetic_branching;
 pub mod testing;
+pub mod writers;
 
 pub use data::error::{Error, Result};
 

@@ -46,11 +46,11 @@
 //! and never less than the tube radius near the junction (larger where a branch's axis runs
 //! through the parent; exactly R at the anchor of a right-angle T, whose far wall is straight).
 
-use crate::writers::centerlines::write_vtp;
 use crate::data::error::{Error, Result};
-use crate::io::input::{CenterlinePolyline, Centerlines};
 use crate::geometry::mesh::closest_on_segment;
+use crate::io::input::{CenterlinePolyline, Centerlines};
 use crate::synthetic::write_binary_stl;
+use crate::writers::centerlines::write_vtp;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;

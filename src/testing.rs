@@ -9,10 +9,10 @@ pub mod suite;
 
 use crate::data::config::MeshConfig;
 use crate::data::error::Result;
-use crate::io::input::{CenterlinePolyline, Centerlines, TriangleSurface};
 use crate::geometry::mesh::{sets, ElementFace, Region, Triad, VesselEnd, VesselMesh};
-use crate::pipeline::{mesh_vessel, Meshed};
+use crate::io::input::{CenterlinePolyline, Centerlines, TriangleSurface};
 use crate::pipeline::progress::Progress;
+use crate::pipeline::{mesh_vessel, Meshed};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Rotation3, Vector3};
 

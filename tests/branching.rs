@@ -509,20 +509,18 @@ fn bare_branched_surface_meshes_with_computed_centerlines() {
 #[test]
 fn non_planar_junctions_mesh_in_sectors_within_the_bars() {
     let dir = temp_dir("sectors");
-    let branch =
-        |radius, angle_deg, azimuth_deg| SideBranch { radius, angle_deg, azimuth_deg, anchor_radii: 0.0 };
+    let branch = |radius, angle_deg, azimuth_deg| SideBranch { radius, angle_deg, azimuth_deg, anchor_radii: 0.0 };
     let cases = [
-        ("four side branches at right angles", vec![
-            branch(1.2, 90.0, 0.0),
-            branch(1.2, 90.0, 90.0),
-            branch(1.2, 90.0, 180.0),
-            branch(1.2, 90.0, 270.0),
-        ], 6),
-        ("three side branches like a tripod's legs", vec![
-            branch(1.0, 60.0, 0.0),
-            branch(1.0, 60.0, 120.0),
-            branch(1.0, 60.0, 240.0),
-        ], 5),
+        (
+            "four side branches at right angles",
+            vec![branch(1.2, 90.0, 0.0), branch(1.2, 90.0, 90.0), branch(1.2, 90.0, 180.0), branch(1.2, 90.0, 270.0)],
+            6,
+        ),
+        (
+            "three side branches like a tripod's legs",
+            vec![branch(1.0, 60.0, 0.0), branch(1.0, 60.0, 120.0), branch(1.0, 60.0, 240.0)],
+            5,
+        ),
     ];
     for (name, branches, slots) in cases {
         let fan = SideBranchFan { parent_radius: 2.0, branches, free_length_radii: 4.0 };

@@ -16,11 +16,11 @@ use nalgebra::{Point3, Vector3};
 use std::path::Path;
 use std::time::Instant;
 use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions, Extraction};
-use vesselhex::writers::centerlines::write_vtp;
 use vesselhex::input::{read_centerlines, read_surface, CenterlinePolyline, TriangleSurface};
 use vesselhex::progress::Progress;
 use vesselhex::surface::LumenSurface;
 use vesselhex::units::LengthUnit;
+use vesselhex::writers::centerlines::write_vtp;
 
 /// Distance from p to the polylines, and the radius interpolated at the closest point.
 fn to_polylines(p: &Point3<f64>, lines: &[CenterlinePolyline]) -> (f64, f64) {

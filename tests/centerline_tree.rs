@@ -14,11 +14,11 @@ use std::path::Path;
 use std::time::Instant;
 use vesselhex::centerline::{CenterlineTree, Junction};
 use vesselhex::centerline_extract::{branch_split, extract_centerlines};
-use vesselhex::writers::centerlines::write_vtp;
 use vesselhex::config::CenterlineConfig;
 use vesselhex::input::{clean_surface, read_centerlines, read_surface, CenterlinePolyline, Centerlines};
 use vesselhex::surface::LumenSurface;
 use vesselhex::units::LengthUnit;
+use vesselhex::writers::centerlines::write_vtp;
 
 /// Angle between two directions, radians.
 fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {

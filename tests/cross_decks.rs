@@ -6,12 +6,12 @@
 
 use quick_xml::events::Event;
 use std::collections::{BTreeMap, BTreeSet};
+use vesselhex::config::material::WallMaterial;
 use vesselhex::config::{MeshConfig, Preset};
 use vesselhex::mesh::Region;
 use vesselhex::units::{LengthUnit, MechanicalUnits};
 use vesselhex::writers::febio::FebioElement;
 use vesselhex::writers::inp::ElementType;
-use vesselhex::config::material::WallMaterial;
 use vesselhex::writers::{abaqus, calculix, febio, WriteOptions};
 
 type Axes = BTreeMap<u32, [f64; 6]>;

@@ -4,10 +4,10 @@
 use super::manifest::Case;
 use super::summary::{Row, Status};
 use super::Settings;
-use crate::stages::centerline::extract::{ExtractOptions, InletChoice};
 use crate::data::config::MeshConfig;
 use crate::data::error::{Error, Result};
 use crate::pipeline::MeshRequest;
+use crate::stages::centerline::extract::{ExtractOptions, InletChoice};
 use std::hash::Hasher;
 use std::path::{Path, PathBuf};
 

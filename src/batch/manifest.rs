@@ -102,7 +102,8 @@ fn json_rows(text: &str, path: &Path) -> Result<Vec<Map<String, Value>>> {
 /// The rows of a CSV manifest, each field a string (empty ones left out).
 fn csv_rows(text: &str, path: &Path) -> Result<Vec<Map<String, Value>>> {
     let mut reader = csv::ReaderBuilder::new().comment(Some(b'#')).trim(csv::Trim::All).from_reader(text.as_bytes());
-    let bad = |e: csv::Error| Error::input(path, format!("not valid CSV: {}", crate::data::error::one_line(&e.to_string())));
+    let bad =
+        |e: csv::Error| Error::input(path, format!("not valid CSV: {}", crate::data::error::one_line(&e.to_string())));
     let header: Vec<String> = reader.headers().map_err(bad)?.iter().map(|h| h.to_ascii_lowercase()).collect();
     if let Some(unknown) = header.iter().find(|h| !KEYS.contains(&h.as_str())) {
         return Err(Error::input(

@@ -23,8 +23,8 @@ pub use manifest::{read_manifest, Case};
 pub use summary::{Row, Status};
 
 use crate::data::config::Preset;
-use crate::data::error::{Error, Result};
 use crate::data::diagnostics::show_bytes;
+use crate::data::error::{Error, Result};
 use crate::data::units::LengthUnit;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};

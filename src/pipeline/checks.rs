@@ -184,7 +184,8 @@ pub(super) fn check_inside(surface: &LumenSurface, tree: &CenterlineTree, center
     let away = |(b, s): &(&crate::stages::centerline::Branch, &crate::stages::centerline::CenterlineSample)| {
         (b.start_junction.is_some() || s.s > s.radius) && (b.end_junction.is_some() || b.length() - s.s > s.radius)
     };
-    let mut probes: Vec<&crate::stages::centerline::CenterlineSample> = tenths.clone().filter(away).map(|(_, s)| s).collect();
+    let mut probes: Vec<&crate::stages::centerline::CenterlineSample> =
+        tenths.clone().filter(away).map(|(_, s)| s).collect();
     if probes.is_empty() {
         probes = tenths.map(|(_, s)| s).collect();
     }
@@ -275,11 +276,7 @@ pub(super) const PLAUSIBLE_RADIUS_MM: (f64, f64) = (0.05, 30.0);
 
 /// A warning when the vessel's median radius (mm) is implausible in the units given, naming the
 /// unit that would make it plausible.
-pub(super) fn unit_warning(
-    radius: f64,
-    units: LengthUnit,
-    centerline_units: Option<LengthUnit>,
-) -> Option<Warning> {
+pub(super) fn unit_warning(radius: f64, units: LengthUnit, centerline_units: Option<LengthUnit>) -> Option<Warning> {
     let (low, high) = PLAUSIBLE_RADIUS_MM;
     if !radius.is_finite() || (low..=high).contains(&radius) {
         return None;

@@ -229,11 +229,11 @@ pub(super) fn short_branch_warnings(
 #[cfg(test)]
 mod tests {
     use super::{end_reports, ends_not_meshed};
-    use crate::stages::centerline::CenterlineTree;
-    use crate::stages::centerline::extract::{EndKind, VesselEnd};
     use crate::data::config::MeshConfig;
-    use crate::io::input::{CenterlinePolyline, Centerlines};
     use crate::data::units::LengthUnit;
+    use crate::io::input::{CenterlinePolyline, Centerlines};
+    use crate::stages::centerline::extract::{EndKind, VesselEnd};
+    use crate::stages::centerline::CenterlineTree;
     use nalgebra::Point3;
 
     #[test]

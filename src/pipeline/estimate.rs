@@ -2,8 +2,8 @@
 //! allocated, held against the memory budget (`--max-memory`, see [`crate::io::memory`]).
 
 use crate::data::config::MeshConfig;
-use crate::data::error::{Error, Result};
 use crate::data::diagnostics::{short, show_bytes};
+use crate::data::error::{Error, Result};
 use crate::io::input::Centerlines;
 use std::path::Path;
 

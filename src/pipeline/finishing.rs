@@ -8,15 +8,15 @@
 
 use crate::data::config::MeshConfig;
 use crate::data::error::Result;
-use crate::stages::additions::extensions::ExtensionReport;
-use crate::io::input::{ReadLimits, TriangleSurface};
 use crate::geometry::mesh::VesselMesh;
-use crate::stages::annotation::meshed::Meshed;
+use crate::geometry::surface::LumenSurface;
+use crate::io::input::{ReadLimits, TriangleSurface};
 use crate::pipeline::progress::Progress;
+use crate::stages::additions::extensions::ExtensionReport;
 use crate::stages::additions::refinement::{Placement, RefinementReport};
 use crate::stages::additions::side_ends::{open_side_end, SideEndReport, SideOpening};
-use crate::geometry::surface::LumenSurface;
 use crate::stages::additions::wall_surfaces::{WallSurface, WallSurfacesReport};
+use crate::stages::annotation::meshed::Meshed;
 use serde::Serialize;
 use std::borrow::Cow;
 
@@ -131,7 +131,12 @@ fn refine_stage(meshed: &mut Meshed, lumen: &LumenSurface, config: &MeshConfig) 
             }
         }
     }
-    meshed.accuracy = crate::stages::annotation::accuracy::surface_accuracy(&meshed.mesh, lumen, &meshed.tree.branches, &meshed.projected)?;
+    meshed.accuracy = crate::stages::annotation::accuracy::surface_accuracy(
+        &meshed.mesh,
+        lumen,
+        &meshed.tree.branches,
+        &meshed.projected,
+    )?;
     Ok(RefinementReport {
         before_projection: r.before_projection,
         after_projection: r.after_projection,
@@ -152,7 +157,8 @@ fn wall_stage(
 ) -> Result<WallSurfacesReport> {
     // A point of the lumen, which every wall surface must enclose.
     let lumen_elements = meshed.mesh.lumen_range();
-    let inside = crate::geometry::mesh::element_centre(&meshed.mesh.corners(lumen_elements.start + lumen_elements.len() / 2));
+    let inside =
+        crate::geometry::mesh::element_centre(&meshed.mesh.corners(lumen_elements.start + lumen_elements.len() / 2));
     let read = |path: &std::path::Path| -> Result<WallSurface> {
         let (s, _) = crate::io::input::read_surface_within(path, config.units, limits)?;
         WallSurface::new(LumenSurface::new(&s)?, &inside)

@@ -41,8 +41,8 @@ use crate::stages::volume::{RadialLevels, VolumeInputs};
 use crate::writers::{self, WriteOptions};
 use std::path::{Path, PathBuf};
 
-pub use report::vessel_report;
 pub use crate::stages::annotation::meshed::Meshed;
+pub use report::vessel_report;
 
 /// Everything `vesselhex mesh` was asked.
 #[derive(Debug, Clone)]
@@ -372,8 +372,14 @@ pub fn mesh_finished(
 ) -> Result<(Meshed, crate::pipeline::finishing::Additions)> {
     let mut progress = Progress::new(true, 9 + crate::pipeline::finishing::stages(config));
     let mut meshed = mesh_vessel(surface, centerlines, config, &mut progress)?;
-    let additions =
-        crate::pipeline::finishing::finish(&mut meshed, surface, config, &ReadLimits::within(max_memory), &mut progress, &[])?;
+    let additions = crate::pipeline::finishing::finish(
+        &mut meshed,
+        surface,
+        config,
+        &ReadLimits::within(max_memory),
+        &mut progress,
+        &[],
+    )?;
     Ok((meshed, additions))
 }
 

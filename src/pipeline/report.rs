@@ -1,7 +1,7 @@
 //! `report.json`: element counts, quality per region, surface fidelity and timings.
 
-pub use crate::data::diagnostics::Warning;
 use crate::data::config::{MeshConfig, WallGrowth};
+pub use crate::data::diagnostics::Warning;
 use crate::data::units::LengthUnit;
 use crate::geometry::mesh::{Region, VesselMesh};
 use crate::geometry::quality::{Bars, Stats};

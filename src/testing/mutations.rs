@@ -6,10 +6,10 @@
 //! Everything random is seeded by the case's and the mutation's names, so a run repeats.
 
 use super::decimate::decimate;
-use crate::stages::centerline::extract::{extract_centerlines, find_caps, EndKind, ExtractOptions, Extraction};
+use crate::data::units::LengthUnit;
 use crate::io::input::topology::{boundary_loops, loop_centre_and_area, orient_consistently, triangle_neighbours};
 use crate::io::input::{clean_surface, read_surface, weld, TriangleSurface};
-use crate::data::units::LengthUnit;
+use crate::stages::centerline::extract::{extract_centerlines, find_caps, EndKind, ExtractOptions, Extraction};
 use crate::writers::write_atomic;
 use nalgebra::{Point3, Rotation3, UnitQuaternion, Vector3, Vector4};
 use std::path::{Path, PathBuf};

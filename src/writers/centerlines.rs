@@ -3,8 +3,8 @@
 //! has normals), every integer cell tag (`CenterlineIds`, `GroupIds`...) as cell data.
 
 use crate::data::error::Result;
-use crate::io::input::Centerlines;
 use crate::io::atomic::write_atomic;
+use crate::io::input::Centerlines;
 use crate::stages::centerline::extract::{branch_split, Extraction};
 use crate::stages::centerline::CenterlineTree;
 use std::path::Path;
@@ -80,13 +80,10 @@ pub fn write_vtp(centerlines: &Centerlines, scale: f64, path: &Path) -> Result<(
 /// Builds the centerline tree of `extraction` (its inlet is the paths' common start) and writes
 /// the tree's branch-split variant ([`super::branch_split`]) to `path`, lengths multiplied by
 /// `scale`. Returns the tree.
-pub fn write_branch_split(
-    extraction: &Extraction,
-    scale: f64,
-    path: &Path,
-) -> Result<CenterlineTree> {
+pub fn write_branch_split(extraction: &Extraction, scale: f64, path: &Path) -> Result<CenterlineTree> {
     let start = extraction.centerlines.polylines.first().map(|l| l.points[0]);
-    let config = crate::data::config::CenterlineConfig { inlet_mm: start.map(|p| p.coords.into()), ..Default::default() };
+    let config =
+        crate::data::config::CenterlineConfig { inlet_mm: start.map(|p| p.coords.into()), ..Default::default() };
     let tree = CenterlineTree::build(&extraction.centerlines, &config, None)?;
     write_vtp(&branch_split(&tree, path), scale, path)?;
     Ok(tree)

@@ -46,8 +46,8 @@ use super::{write_atomic, WriteOptions};
 pub use crate::data::config::febio::{BloodConstants, FebioConfig, FebioElement, FsiControl};
 use crate::data::config::material::WallMaterial;
 use crate::data::error::{Error, Result};
-use crate::geometry::mesh::{face_nodes, sets, ElementFace, Region, VesselMesh};
 use crate::data::units::MechanicalUnits;
+use crate::geometry::mesh::{face_nodes, sets, ElementFace, Region, VesselEnd, VesselMesh};
 use std::fmt::Write as _;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -678,15 +678,66 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
     let velocity = u.velocity(f.inlet_mean_velocity_m_s);
     let p_out = u.stress(f.outlet_pressure_mmhg * MMHG_PA);
     let interface = node_set_of(mesh, sets::INTERFACE_NODES)?;
-    let on_interface = {
-        let mut v = vec![false; mesh.nodes.len()];
-        for &n in interface {
-            v[n as usize] = true;
-        }
-        v
-    };
 
-    let comment = vec![
+    let comment = fsi_deck_comment(u, f, b);
+    header(xml, &comment, "fluid-FSI");
+    control(xml, TEMPLATE_CONTROL_FSI, f.time_steps, f.step_size_s, f.step_size_s * 1e-2)?;
+    xml.open("Material", &[]);
+    let blood = fill_template(
+        TEMPLATE_BLOOD.0,
+        TEMPLATE_BLOOD.1,
+        &[
+            ("id", "1".into()),
+            ("name", "blood".into()),
+            ("mesh_motion_modulus", param(u.stress(1e-3))),
+            ("density", param(u.density(b.density_kg_m3))),
+            ("bulk_modulus", param(u.stress(b.bulk_modulus_pa))),
+            ("viscosity", param(u.viscosity(b.viscosity_pa_s))),
+        ],
+    )?;
+    xml.fragment(&blood);
+    wall_materials(xml, mesh, &options.material, u, 2)?;
+    xml.close("Material");
+
+    let (extended, lumen_inner_sets) = fsi_mesh(xml, mesh, u, interface)?;
+    let mut domains: Vec<(&str, &str)> = vec![(Region::Lumen.name(), "blood")];
+    domains.extend(Region::WALL.iter().map(|r| (r.name(), r.name())));
+    if extended {
+        domains.push((Region::Extension.name(), "blood"));
+    }
+    mesh_domains(xml, &domains);
+    mat_axes(xml, mesh);
+
+    fsi_boundary(xml, mesh, &outlets, &lumen_inner_sets, extended, p_out);
+    fsi_loads(xml, inlet, &outlets, velocity, f.backflow_beta);
+    xml.open("LoadData", &[]);
+    load_curve(xml, 1, "inflow_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
+    load_curve(xml, 2, "outlet_pressure_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
+    load_curve(xml, 3, "backflow_on", "STEP", &[(0.0, 1.0), (f.ramp_s, 1.0)]);
+    xml.close("LoadData");
+
+    output(
+        xml,
+        sets::INTERFACE_NODES,
+        &[
+            "displacement",
+            "stress",
+            "velocity",
+            "fluid pressure",
+            "fluid velocity",
+            "fluid dilatation",
+            "fluid stress",
+            "nodal fluid velocity",
+            "relative fluid velocity",
+        ],
+    );
+    xml.close("febio_spec");
+    Ok(())
+}
+
+/// The comment at the head of `fsi.feb`: what the deck models, in which units.
+fn fsi_deck_comment(u: MechanicalUnits, f: &FsiControl, b: &BloodConstants) -> Vec<String> {
+    vec![
         format!(
             "vesselhex {}: FEBio 4.0 monolithic fluid-structure deck (Module fluid-FSI).",
             env!("CARGO_PKG_VERSION")
@@ -721,27 +772,25 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
         "The fluid-FSI system is non-symmetric: run with a non-symmetric linear solver (pardiso, the default".into(),
         "of MKL builds); skyline cannot factor it.".into(),
         "Node id = vesselhex node index + 1, element id = element index + 1 (the same labels in every deck).".into(),
-    ];
+    ]
+}
 
-    header(xml, &comment, "fluid-FSI");
-    control(xml, TEMPLATE_CONTROL_FSI, f.time_steps, f.step_size_s, f.step_size_s * 1e-2)?;
-    xml.open("Material", &[]);
-    let blood = fill_template(
-        TEMPLATE_BLOOD.0,
-        TEMPLATE_BLOOD.1,
-        &[
-            ("id", "1".into()),
-            ("name", "blood".into()),
-            ("mesh_motion_modulus", param(u.stress(1e-3))),
-            ("density", param(u.density(b.density_kg_m3))),
-            ("bulk_modulus", param(u.stress(b.bulk_modulus_pa))),
-            ("viscosity", param(u.viscosity(b.viscosity_pa_s))),
-        ],
-    )?;
-    xml.fragment(&blood);
-    wall_materials(xml, mesh, &options.material, u, 2)?;
-    xml.close("Material");
-
+/// The deck's `Mesh`: nodes, elements (flow extensions as rigid-walled fluid), the wall's and
+/// the lumen's end sets (the lumen's without its interface nodes), the interface and the end
+/// surfaces. Returns whether the mesh has flow extensions, and each end's lumen set.
+fn fsi_mesh(
+    xml: &mut Xml,
+    mesh: &VesselMesh,
+    u: MechanicalUnits,
+    interface: &[u32],
+) -> Result<(bool, Vec<(String, String)>)> {
+    let on_interface = {
+        let mut v = vec![false; mesh.nodes.len()];
+        for &n in interface {
+            v[n as usize] = true;
+        }
+        v
+    };
     xml.open("Mesh", &[]);
     let all: Vec<u32> = (0..mesh.nodes.len() as u32).collect();
     nodes(xml, mesh, "all_nodes", &all, None, u);
@@ -775,19 +824,24 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
     }
     xml.close("Mesh");
 
-    let mut domains: Vec<(&str, &str)> = vec![(Region::Lumen.name(), "blood")];
-    domains.extend(Region::WALL.iter().map(|r| (r.name(), r.name())));
-    if extended {
-        domains.push((Region::Extension.name(), "blood"));
-    }
-    mesh_domains(xml, &domains);
-    mat_axes(xml, mesh);
+    Ok((extended, lumen_inner_sets))
+}
 
+/// The deck's `Boundary`: ends fixed (mesh motion), no slip on the interface (and on the
+/// extensions' walls), the outlets' fluid pressure.
+fn fsi_boundary(
+    xml: &mut Xml,
+    mesh: &VesselMesh,
+    outlets: &[&VesselEnd],
+    lumen_inner_sets: &[(String, String)],
+    extended: bool,
+    p_out: f64,
+) {
     xml.open("Boundary", &[]);
     for end in &mesh.ends {
         zero_displacement(xml, &format!("fix_wall_{}", end.name), &sets::wall_end(&end.name), [true; 3]);
     }
-    for (end, set) in &lumen_inner_sets {
+    for (end, set) in lumen_inner_sets {
         zero_displacement(xml, &format!("fix_lumen_{end}"), set, [true; 3]);
     }
     let mut no_slip = vec![("no_slip", sets::INTERFACE_NODES)];
@@ -802,14 +856,18 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
         }
         xml.close("bc");
     }
-    for end in &outlets {
+    for end in outlets {
         let surf = sets::lumen_end(&end.name);
         xml.open("bc", &[("name", &format!("pressure_{}", end.name)), ("surface", &surf), ("type", "fluid pressure")]);
         xml.leaf("pressure", &[("lc", "2")], &param(p_out));
         xml.close("bc");
     }
     xml.close("Boundary");
+}
 
+/// The deck's `Loads`: the fluid-FSI traction on the interface, the inlet's parabolic
+/// velocity and the outlets' backflow stabilization.
+fn fsi_loads(xml: &mut Xml, inlet: &VesselEnd, outlets: &[&VesselEnd], velocity: f64, backflow_beta: f64) {
     xml.open("Loads", &[]);
     xml.open(
         "surface_load",
@@ -832,7 +890,7 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
     xml.leaf("parabolic", &[], "1");
     xml.leaf("prescribe_rim_pressure", &[], "1");
     xml.close("surface_load");
-    for end in &outlets {
+    for end in outlets {
         let surf = sets::lumen_end(&end.name);
         xml.open(
             "surface_load",
@@ -842,34 +900,10 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
                 ("type", "fluid backflow stabilization"),
             ],
         );
-        xml.leaf("beta", &[("lc", "3")], &param(f.backflow_beta));
+        xml.leaf("beta", &[("lc", "3")], &param(backflow_beta));
         xml.close("surface_load");
     }
     xml.close("Loads");
-
-    xml.open("LoadData", &[]);
-    load_curve(xml, 1, "inflow_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
-    load_curve(xml, 2, "outlet_pressure_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
-    load_curve(xml, 3, "backflow_on", "STEP", &[(0.0, 1.0), (f.ramp_s, 1.0)]);
-    xml.close("LoadData");
-
-    output(
-        xml,
-        sets::INTERFACE_NODES,
-        &[
-            "displacement",
-            "stress",
-            "velocity",
-            "fluid pressure",
-            "fluid velocity",
-            "fluid dilatation",
-            "fluid stress",
-            "nodal fluid velocity",
-            "relative fluid velocity",
-        ],
-    );
-    xml.close("febio_spec");
-    Ok(())
 }
 
 /// Streams a deck into `dir/rel`. A deck that fails midway (a template, a missing set) leaves

@@ -58,8 +58,8 @@ use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::data::config::InletProfile;
 use crate::data::error::{Error, Result};
-use crate::geometry::mesh::{face_nodes, quad_area_vector, sets, VesselMesh};
 use crate::data::units::LengthUnit;
+use crate::geometry::mesh::{face_nodes, quad_area_vector, sets, VesselMesh};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 

@@ -59,8 +59,8 @@ use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
 pub use crate::data::config::fe::{ElementType, FeConfig, MaterialModel};
 use crate::data::error::{Error, Result};
-use crate::geometry::mesh::{abaqus_face_label, sets, ElementFace, Region, VesselMesh, FACE_INNER, HEX_EDGES};
 use crate::data::units::MechanicalUnits;
+use crate::geometry::mesh::{abaqus_face_label, sets, ElementFace, Region, VesselMesh, FACE_INNER, HEX_EDGES};
 use nalgebra::Point3;
 use std::collections::HashMap;
 use std::io::Write;
@@ -376,6 +376,135 @@ fn middle_lumen_ring(mesh: &VesselMesh) -> Option<Vec<u32>> {
     Some(mid)
 }
 
+/// The deck's node sets: those of the mesh made of wall nodes only, plus the middle lumen ring
+/// (`lumen_ring`, the interface when the lumen has no ring), as labels (with the mid-edge nodes
+/// they complete, for quadratic elements), sorted.
+fn wall_node_sets(mesh: &VesselMesh, nodes: &[u32], mids: Option<&MidEdges>) -> Vec<(String, Vec<u64>)> {
+    let mut is_wall_node = vec![false; mesh.nodes.len()];
+    for &n in nodes {
+        is_wall_node[n as usize] = true;
+    }
+    let mut raw_sets: Vec<(String, Vec<u32>)> = mesh
+        .node_sets
+        .iter()
+        .filter(|(_, v)| !v.is_empty() && v.iter().all(|&n| is_wall_node[n as usize]))
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    let ring = middle_lumen_ring(mesh).or_else(|| mesh.node_sets.get(sets::INTERFACE_NODES).cloned());
+    if let Some(ring) = ring {
+        raw_sets.push(("lumen_ring".into(), ring));
+    }
+    let mut node_sets = Vec::with_capacity(raw_sets.len());
+    for (name, members) in raw_sets {
+        let mut labels: Vec<u64> = members.iter().map(|&n| n as u64 + 1).collect();
+        if let Some(m) = mids {
+            labels.extend(m.completing(mesh, &members).into_iter().map(|k| m.label(mesh, k)));
+        }
+        labels.sort_unstable();
+        node_sets.push((sanitize_name(&name), labels));
+    }
+    node_sets
+}
+
+/// The end rings to hold: each end's wall ring (its set in `node_sets`), with, for
+/// [`EndHold::Equations`], each node's radial direction in the end plane.
+fn end_rings(
+    mesh: &VesselMesh,
+    node_sets: &[(String, Vec<u64>)],
+    mids: Option<&MidEdges>,
+    hold: EndHold,
+) -> Result<Vec<EndRing>> {
+    let mut ends = Vec::new();
+    for end in &mesh.ends {
+        let name = sanitize_name(&sets::wall_end(&end.name));
+        let Some((_, labels)) = node_sets.iter().find(|s| s.0 == name) else {
+            continue;
+        };
+        let normal = end.outward_normal.normalize();
+        let mut radial = Vec::new();
+        if hold == EndHold::Equations {
+            for &label in labels {
+                let p = label_position(mesh, mids, label);
+                let d = p - end.centre;
+                let r = d - normal * d.dot(&normal);
+                let on_axis = r.norm() <= 1e-9 * d.norm();
+                if on_axis || !r.norm().is_finite() {
+                    return Err(Error::Geometry(format!(
+                        "end '{}': ring node {label} lies on the end's axis, so it has no radial direction to move in",
+                        end.name
+                    )));
+                }
+                radial.push((label, r.normalize()));
+            }
+        }
+        ends.push(EndRing { set: name, labels: labels.clone(), centre: end.centre, normal, radial });
+    }
+    if ends.is_empty() {
+        return Err(Error::Geometry("the mesh has no end rings to hold: the inflation would be ill-posed".into()));
+    }
+
+    Ok(ends)
+}
+
+/// Each wall layer's block: its elements, fibre angle and material, rendered from the
+/// dialect's template.
+fn layer_blocks(
+    mesh: &VesselMesh,
+    options: &WriteOptions,
+    dialect: Dialect,
+    units: &MechanicalUnits,
+) -> Result<Vec<LayerBlock>> {
+    let fe = &options.fe;
+    let (mat_text, mat_source) = template(fe, dialect, material_template(fe.material))?;
+    let mut layers = Vec::new();
+    for region in Region::WALL {
+        let range = mesh.region_range(region);
+        if range.is_empty() {
+            continue;
+        }
+        let layer_name = sanitize_name(region.name());
+        let beta_deg = mesh.layers.iter().find(|l| l.region == region).map(|l| l.fibre_angle_deg).unwrap_or(0.0);
+        let m = options.material.layer(region);
+        m.check(region.name())?;
+        if dialect == Dialect::Calculix && fe.material == MaterialModel::Hgo && m.kappa != 0.0 {
+            return Err(Error::Config(format!(
+                "material.{}.kappa = {}: CalculiX's fibre material (ELASTIC_FIBER) has no dispersion, so its deck \
+                 would differ from the Abaqus and FEBio ones; set kappa = 0 or leave out the calculix and fsi formats",
+                region.name(),
+                m.kappa
+            )));
+        }
+        let material_name = match (dialect, fe.material) {
+            (Dialect::Calculix, MaterialModel::Hgo) => format!("ELASTIC_FIBER_{layer_name}"),
+            (Dialect::Abaqus, MaterialModel::Hgo) => format!("HGO_{layer_name}"),
+            (_, MaterialModel::LinearElastic) => format!("LINEAR_{layer_name}"),
+        };
+        let (fx, fy) = fibre_local(beta_deg);
+        let values = [
+            ("LAYER", layer_name.clone()),
+            ("MATERIAL", material_name.clone()),
+            ("C10", fmt_const(m.c10(units))),
+            ("D", fmt_const(m.d(units))),
+            ("K1", fmt_const(m.k1(units))),
+            ("K2", fmt_const(m.k2)),
+            ("KAPPA", fmt_const(m.kappa)),
+            ("FIBRE1_X", fmt_const(fx)),
+            ("FIBRE1_Y", fmt_const(fy)),
+            ("FIBRE2_X", fmt_const(fx)),
+            ("FIBRE2_Y", fmt_const(-fy)),
+            ("BETA_DEG", fmt_const(beta_deg)),
+            ("E", fmt_const(m.youngs_modulus(units))),
+            ("NU", fmt_const(m.poisson_ratio)),
+            ("DENSITY", fmt_const(m.density(units))),
+            ("UNITS", units.describe()),
+        ];
+        let material_text = render(&mat_text, &mat_source, &values)?;
+        layers.push(LayerBlock { region, name: layer_name, range, beta_deg, material_name, material_text });
+    }
+
+    Ok(layers)
+}
+
 impl<'a> Deck<'a> {
     fn new(mesh: &'a VesselMesh, options: &WriteOptions, dialect: Dialect, hold: EndHold) -> Result<Self> {
         let fe = &options.fe;
@@ -403,30 +532,7 @@ impl<'a> Deck<'a> {
         let nodes = mesh.nodes_of(wall.clone());
         let mids = element.is_quadratic().then(|| MidEdges::new(mesh));
 
-        // Node sets made of wall nodes only, plus the middle lumen ring.
-        let mut is_wall_node = vec![false; mesh.nodes.len()];
-        for &n in &nodes {
-            is_wall_node[n as usize] = true;
-        }
-        let mut raw_sets: Vec<(String, Vec<u32>)> = mesh
-            .node_sets
-            .iter()
-            .filter(|(_, v)| !v.is_empty() && v.iter().all(|&n| is_wall_node[n as usize]))
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
-        let ring = middle_lumen_ring(mesh).or_else(|| mesh.node_sets.get(sets::INTERFACE_NODES).cloned());
-        if let Some(ring) = ring {
-            raw_sets.push(("lumen_ring".into(), ring));
-        }
-        let mut node_sets = Vec::with_capacity(raw_sets.len());
-        for (name, members) in raw_sets {
-            let mut labels: Vec<u64> = members.iter().map(|&n| n as u64 + 1).collect();
-            if let Some(m) = &mids {
-                labels.extend(m.completing(mesh, &members).into_iter().map(|k| m.label(mesh, k)));
-            }
-            labels.sort_unstable();
-            node_sets.push((sanitize_name(&name), labels));
-        }
+        let node_sets = wall_node_sets(mesh, &nodes, mids.as_ref());
         let surfaces: Vec<(String, Vec<ElementFace>)> = mesh
             .face_sets
             .iter()
@@ -440,82 +546,8 @@ impl<'a> Deck<'a> {
                 sets::WALL_LUMEN_FACES
             )));
         }
-        let mut ends = Vec::new();
-        for end in &mesh.ends {
-            let name = sanitize_name(&sets::wall_end(&end.name));
-            let Some((_, labels)) = node_sets.iter().find(|s| s.0 == name) else {
-                continue;
-            };
-            let normal = end.outward_normal.normalize();
-            let mut radial = Vec::new();
-            if hold == EndHold::Equations {
-                for &label in labels {
-                    let p = label_position(mesh, mids.as_ref(), label);
-                    let d = p - end.centre;
-                    let r = d - normal * d.dot(&normal);
-                    let on_axis = r.norm() <= 1e-9 * d.norm();
-                    if on_axis || !r.norm().is_finite() {
-                        return Err(Error::Geometry(format!(
-                            "end '{}': ring node {label} lies on the end's axis, so it has no radial direction to move in",
-                            end.name
-                        )));
-                    }
-                    radial.push((label, r.normalize()));
-                }
-            }
-            ends.push(EndRing { set: name, labels: labels.clone(), centre: end.centre, normal, radial });
-        }
-        if ends.is_empty() {
-            return Err(Error::Geometry("the mesh has no end rings to hold: the inflation would be ill-posed".into()));
-        }
-
-        // Materials.
-        let (mat_text, mat_source) = template(fe, dialect, material_template(fe.material))?;
-        let mut layers = Vec::new();
-        for region in Region::WALL {
-            let range = mesh.region_range(region);
-            if range.is_empty() {
-                continue;
-            }
-            let layer_name = sanitize_name(region.name());
-            let beta_deg = mesh.layers.iter().find(|l| l.region == region).map(|l| l.fibre_angle_deg).unwrap_or(0.0);
-            let m = options.material.layer(region);
-            m.check(region.name())?;
-            if dialect == Dialect::Calculix && fe.material == MaterialModel::Hgo && m.kappa != 0.0 {
-                return Err(Error::Config(format!(
-                    "material.{}.kappa = {}: CalculiX's fibre material (ELASTIC_FIBER) has no dispersion, so its deck \
-                     would differ from the Abaqus and FEBio ones; set kappa = 0 or leave out the calculix and fsi formats",
-                    region.name(),
-                    m.kappa
-                )));
-            }
-            let material_name = match (dialect, fe.material) {
-                (Dialect::Calculix, MaterialModel::Hgo) => format!("ELASTIC_FIBER_{layer_name}"),
-                (Dialect::Abaqus, MaterialModel::Hgo) => format!("HGO_{layer_name}"),
-                (_, MaterialModel::LinearElastic) => format!("LINEAR_{layer_name}"),
-            };
-            let (fx, fy) = fibre_local(beta_deg);
-            let values = [
-                ("LAYER", layer_name.clone()),
-                ("MATERIAL", material_name.clone()),
-                ("C10", fmt_const(m.c10(&units))),
-                ("D", fmt_const(m.d(&units))),
-                ("K1", fmt_const(m.k1(&units))),
-                ("K2", fmt_const(m.k2)),
-                ("KAPPA", fmt_const(m.kappa)),
-                ("FIBRE1_X", fmt_const(fx)),
-                ("FIBRE1_Y", fmt_const(fy)),
-                ("FIBRE2_X", fmt_const(fx)),
-                ("FIBRE2_Y", fmt_const(-fy)),
-                ("BETA_DEG", fmt_const(beta_deg)),
-                ("E", fmt_const(m.youngs_modulus(&units))),
-                ("NU", fmt_const(m.poisson_ratio)),
-                ("DENSITY", fmt_const(m.density(&units))),
-                ("UNITS", units.describe()),
-            ];
-            let material_text = render(&mat_text, &mat_source, &values)?;
-            layers.push(LayerBlock { region, name: layer_name, range, beta_deg, material_name, material_text });
-        }
+        let ends = end_rings(mesh, &node_sets, mids.as_ref(), hold)?;
+        let layers = layer_blocks(mesh, options, dialect, &units)?;
 
         // Step.
         let (step_text, step_source) = template(fe, dialect, "step_inflation.inp")?;
@@ -608,6 +640,33 @@ impl<'a> Deck<'a> {
                 t.uint(f.element as u64 + 1).str(", ").str(abaqus_face_label(f.face as usize)).byte(b'\n');
             })?;
         }
+        self.write_end_holds(w)?;
+        self.write_orientations(w)?;
+        for layer in &self.layers {
+            writeln!(
+                w,
+                "** {} ({}): fibres at +-{} deg from circumferential",
+                layer.name,
+                layer.region.name(),
+                fmt_const(layer.beta_deg)
+            )?;
+            w.write_all(layer.material_text.as_bytes())?;
+        }
+        for layer in &self.layers {
+            writeln!(
+                w,
+                "*SOLID SECTION, ELSET={}, MATERIAL={}, ORIENTATION=ORI_{}",
+                layer.name, layer.material_name, layer.name
+            )?;
+            if self.dialect == Dialect::Abaqus {
+                writeln!(w, ",")?;
+            }
+        }
+        Ok(())
+    }
+
+    /// How the end rings are held (see [`EndHold`]).
+    fn write_end_holds(&self, w: &mut dyn Write) -> std::io::Result<()> {
         match self.hold {
             EndHold::Transform => {
                 writeln!(
@@ -655,6 +714,12 @@ impl<'a> Deck<'a> {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// Each layer's per-element triads (a distribution) and the orientation built on them.
+    fn write_orientations(&self, w: &mut dyn Write) -> std::io::Result<()> {
+        let mesh = self.mesh;
         if self.dialect == Dialect::Abaqus {
             writeln!(w, "*DISTRIBUTION TABLE, NAME=TRIAD_TABLE")?;
             writeln!(w, "COORD3D, COORD3D")?;
@@ -689,26 +754,6 @@ impl<'a> Deck<'a> {
                     writeln!(w, "*ORIENTATION, NAME=ORI_{}, SYSTEM=RECTANGULAR", layer.name)?;
                     writeln!(w, "{dist}")?;
                 }
-            }
-        }
-        for layer in &self.layers {
-            writeln!(
-                w,
-                "** {} ({}): fibres at +-{} deg from circumferential",
-                layer.name,
-                layer.region.name(),
-                fmt_const(layer.beta_deg)
-            )?;
-            w.write_all(layer.material_text.as_bytes())?;
-        }
-        for layer in &self.layers {
-            writeln!(
-                w,
-                "*SOLID SECTION, ELSET={}, MATERIAL={}, ORIENTATION=ORI_{}",
-                layer.name, layer.material_name, layer.name
-            )?;
-            if self.dialect == Dialect::Abaqus {
-                writeln!(w, ",")?;
             }
         }
         Ok(())

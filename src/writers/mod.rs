@@ -4,8 +4,8 @@
 //! `--formats` names rows of [`WRITERS`]; adding a solver is one module and one row.
 
 use crate::data::error::Result;
-use crate::geometry::mesh::VesselMesh;
 use crate::data::units::LengthUnit;
+use crate::geometry::mesh::VesselMesh;
 use std::path::{Path, PathBuf};
 
 pub use crate::io::atomic::{write_atomic, write_text_file};

@@ -48,7 +48,9 @@ use super::text::{write_binary, write_items, Text};
 use super::{write_atomic, WriteOptions};
 use crate::data::config::{FoamSolver, InletProfile, OpenFoamConfig};
 use crate::data::error::{Error, Result};
-use crate::geometry::mesh::{closest_on_segment, face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh, HEX_FACES};
+use crate::geometry::mesh::{
+    closest_on_segment, face_nodes, quad_area_vector, sets, ElementFace, Region, VesselMesh, HEX_FACES,
+};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use std::io::Write;

@@ -52,7 +52,6 @@ pub enum MaterialModel {
     LinearElastic,
 }
 
-
 /// Settings of the Abaqus and CalculiX decks (case file section `[fe]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -14,11 +14,11 @@ pub mod topology;
 mod vtk_legacy;
 mod vtp;
 
-use crate::data::error::{Error, Result};
 use crate::data::diagnostics::short;
+use crate::data::error::{Error, Result};
+use crate::data::units::LengthUnit;
 pub use crate::geometry::surface::TriangleSurface;
 pub use crate::io::memory::ReadLimits;
-use crate::data::units::LengthUnit;
 pub use arrays::{centerlines_from_arrays, surface_from_arrays, PolylineArrays};
 pub use hygiene::{clean_surface, weld, HygieneReport};
 use indexmap::IndexMap;

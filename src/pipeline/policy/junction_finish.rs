@@ -26,8 +26,11 @@ pub(crate) struct FinishQuality {
 impl FinishQuality {
     /// A whole mesh's figures (its quality annotated).
     pub(crate) fn of_mesh(mesh: &VesselMesh) -> FinishQuality {
-        let validity: Vec<f64> =
-            mesh.quality.iter().map(|q| crate::geometry::quality::validity_from(q.scaled_jacobian, q.face_pyramid)).collect();
+        let validity: Vec<f64> = mesh
+            .quality
+            .iter()
+            .map(|q| crate::geometry::quality::validity_from(q.scaled_jacobian, q.face_pyramid))
+            .collect();
         FinishQuality::of(mesh, &validity, |_| true)
     }
 

@@ -94,8 +94,7 @@ pub(crate) fn mesh_dropping_what_fails(
                 centerline: crate::data::config::CenterlineConfig { sacs_mm: vec![], ..tree_config.centerline.clone() },
                 ..tree_config.clone()
             };
-            let meshed =
-                mesh_vessel(surface, &centerlines, &config, progress).map_err(|e| name_winding(e, surface))?;
+            let meshed = mesh_vessel(surface, &centerlines, &config, progress).map_err(|e| name_winding(e, surface))?;
             (meshed, centerlines)
         }
         // A branch found on the surface that ends too close to its junction for the junction's
@@ -232,7 +231,8 @@ pub(super) fn coarser_junctions(config: &MeshConfig, centerlines: &Centerlines) 
         && l.axial_spacing_mm.is_none()
         && l.axial_spacing < COARSE_JUNCTION_SPACING;
     finer.then(|| {
-        let lumen = crate::data::config::LumenConfig { junction_axial_spacing: Some(COARSE_JUNCTION_SPACING), ..l.clone() };
+        let lumen =
+            crate::data::config::LumenConfig { junction_axial_spacing: Some(COARSE_JUNCTION_SPACING), ..l.clone() };
         MeshConfig { lumen, ..config.clone() }
     })
 }

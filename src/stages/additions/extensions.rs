@@ -25,11 +25,11 @@
 //!
 //! The `VesselEnd` keeps the vessel's own end: its centre and normal are the cut's.
 
-use crate::stages::annotation::annotate::element_triad;
 use crate::data::config::{ExtensionShape, ExtensionsConfig};
 use crate::data::error::{Error, Result};
 use crate::geometry::mesh::{sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, FACE_DOWNSTREAM, FACE_OUTER};
 use crate::geometry::quality::{element_quality, Stats};
+use crate::stages::annotation::annotate::element_triad;
 use nalgebra::{Point3, Vector2, Vector3};
 use serde::Serialize;
 use std::borrow::Cow;
@@ -191,7 +191,8 @@ fn end_section(mesh: &VesselMesh, end: &VesselEnd) -> Result<EndSection> {
         .map(|f| {
             let c = mesh.corners(f.element as usize);
             let opposite = crate::geometry::mesh::OPPOSITE_FACE[f.face as usize];
-            (crate::geometry::mesh::face_centre(&c, f.face as usize) - crate::geometry::mesh::face_centre(&c, opposite)).dot(&normal)
+            (crate::geometry::mesh::face_centre(&c, f.face as usize) - crate::geometry::mesh::face_centre(&c, opposite))
+                .dot(&normal)
         })
         .collect();
     let element_length = lengths.iter().sum::<f64>() / lengths.len().max(1) as f64;

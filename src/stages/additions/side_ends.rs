@@ -11,12 +11,12 @@
 //! The patch follows the mesh's faces, so its rim is a staircase around the cap's: its area is
 //! reported next to the cap's.
 
-use crate::io::input::TriangleSurface;
 use crate::geometry::mesh::{
     face_centre, face_key, face_nodes, quad_area_vector, sets, ElementFace, Region, VesselEnd, VesselMesh, WallColumns,
 };
-use crate::stages::annotation::meshed::Meshed;
 use crate::geometry::quality::boundary_face_skewness;
+use crate::io::input::TriangleSurface;
+use crate::stages::annotation::meshed::Meshed;
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 use std::collections::HashMap;

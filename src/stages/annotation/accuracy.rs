@@ -7,11 +7,11 @@
 //!   diagonal). It tells whether the mesh captures the shape, which node distances alone cannot.
 //!   Input vertices beyond the first and last mesh sections (caps, trimmed ends) are left out.
 
-use crate::stages::centerline::Branch;
 use crate::data::error::Result;
 use crate::geometry::mesh::{face_nodes, sets, VesselMesh};
-use crate::stages::projection::{BranchEnd, ProjectedBranch};
 use crate::geometry::surface::LumenSurface;
+use crate::stages::centerline::Branch;
+use crate::stages::projection::{BranchEnd, ProjectedBranch};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use serde::Serialize;

@@ -5,8 +5,8 @@
 //! reads names from the mesh alone, follows: OpenFOAM patches, FEBio surfaces, Abaqus and
 //! CalculiX sets, the FSI maps' keys. report.json names every end as the mesh does.
 
-use crate::stages::centerline::extract::VesselEnd;
 use crate::geometry::mesh::{sets, VesselMesh};
+use crate::stages::centerline::extract::VesselEnd;
 
 /// A mesh end belongs to the end found on the surface nearest its centre within this many of
 /// that end's radii (a dome's mesh stops inside its tip).

@@ -1,13 +1,13 @@
 //! A vessel meshed and not yet finished or written: the mesh and what was learnt on the way,
 //! shared by the pipeline that builds it and the stages that finish it.
 
-use crate::stages::annotation::accuracy::SurfaceAccuracy;
-use crate::stages::junction::blocks::SectionTemplate;
-use crate::stages::centerline::CenterlineTree;
-use crate::stages::junction::JunctionGeometry;
-use crate::geometry::mesh::VesselMesh;
-use crate::stages::projection::ProjectedBranch;
 use crate::data::diagnostics::Warning;
+use crate::geometry::mesh::VesselMesh;
+use crate::stages::annotation::accuracy::SurfaceAccuracy;
+use crate::stages::centerline::CenterlineTree;
+use crate::stages::junction::blocks::SectionTemplate;
+use crate::stages::junction::JunctionGeometry;
+use crate::stages::projection::ProjectedBranch;
 use crate::stages::volume::JunctionVariant;
 
 /// A finished mesh with what was learnt on the way.

@@ -8,9 +8,9 @@
 //! radius where it leaves the junction, about its centerline, which runs on to the junction's
 //! centre), and the wall over it.
 
+use crate::geometry::mesh::{closest_on_segment, face_key, VesselMesh, WallColumns, FACE_OUTER};
 use crate::stages::centerline::CenterlineTree;
 use crate::stages::junction::JunctionGeometry;
-use crate::geometry::mesh::{closest_on_segment, face_key, VesselMesh, WallColumns, FACE_OUTER};
 use nalgebra::{Point3, Vector3};
 use std::collections::HashMap;
 

@@ -13,9 +13,9 @@ pub(crate) mod skeleton;
 
 use crate::data::config::CenterlineConfig;
 use crate::data::error::{Error, Result};
-use crate::io::input::Centerlines;
 use crate::geometry::surface::LumenSurface;
 use crate::geometry::vector::any_perpendicular;
+use crate::io::input::Centerlines;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 pub(crate) use rooted::ForcedMerge;

@@ -51,72 +51,7 @@ pub(crate) fn hang(
     source: &Path,
 ) -> Result<RootedTree> {
     let Skeleton { mut nodes, mut edges, .. } = skeleton;
-    let mut incident: Vec<Vec<usize>> = vec![vec![]; nodes.len()];
-    for (i, e) in edges.iter().enumerate() {
-        incident[e.ends[0]].push(i);
-        incident[e.ends[1]].push(i);
-    }
-    let mut children: Vec<Vec<usize>> = vec![vec![]; nodes.len()];
-    let mut parent: Vec<Option<usize>> = vec![None; nodes.len()];
-    let mut seen = vec![false; nodes.len()];
-    let mut used = vec![false; edges.len()];
-    let mut bfs = vec![inlet];
-    seen[inlet] = true;
-    let mut next = 0;
-    while next < bfs.len() {
-        let u = bfs[next];
-        next += 1;
-        for &e in &incident[u] {
-            if used[e] {
-                continue;
-            }
-            used[e] = true;
-            if edges[e].ends[1] == u {
-                edges[e].line = edges[e].line.reversed();
-                edges[e].ends.swap(0, 1);
-            }
-            let v = edges[e].ends[1];
-            if seen[v] {
-                let p = nodes[v].point;
-                return Err(Error::input(
-                    source,
-                    format!(
-                        "the centerlines form a closed loop: polyline {} reaches ({:.3}, {:.3}, {:.3}) mm, which the \
-                         tree already reaches another way from the inlet; a vessel tree has no loops, remove one \
-                         polyline of the loop",
-                        edges[e].source, p.x, p.y, p.z
-                    ),
-                ));
-            }
-            seen[v] = true;
-            parent[v] = Some(e);
-            children[u].push(e);
-            bfs.push(v);
-        }
-    }
-    if let Some(lost) = (0..edges.len()).find(|&e| !used[e]) {
-        let line = &edges[lost].line;
-        let gap =
-            |p| (0..edges.len()).filter(|&e| used[e]).map(|e| edges[e].line.closest(p).0).fold(f64::INFINITY, f64::min);
-        let (a, b) = (line.points[0], line.points[line.points.len() - 1]);
-        return Err(Error::input(
-            source,
-            format!(
-                "polyline {} (from ({:.3}, {:.3}, {:.3}) to ({:.3}, {:.3}, {:.3}) mm) does not connect to the others: \
-                 its ends are {:.3} and {:.3} mm from the nearest other polyline. Polylines must meet at a shared \
-                 point (or all start at the inlet)",
-                edges[lost].source,
-                a.x,
-                a.y,
-                a.z,
-                b.x,
-                b.y,
-                b.z,
-                gap(&a),
-                gap(&b)
-            ),
-        ));
-    }
+    let (mut children, mut parent) = orient_from_inlet(&nodes, &mut edges, inlet, source)?;
 
     let first_parted = nodes.len();
     split_shared_trunks(&mut nodes, &mut edges, &mut children, &mut parent, inlet);
@@ -199,6 +134,83 @@ pub(crate) fn hang(
         order.extend(children[edges[e].ends[1]].iter().copied());
     }
     Ok(RootedTree { nodes, edges, children, parent, order, parted, close_merges })
+}
+
+/// Orients every edge away from node `inlet` (a breadth-first walk): each node's edges out and
+/// the edge into it. A loop, or an edge the walk does not reach, is an error naming the polyline.
+fn orient_from_inlet(
+    nodes: &[Node],
+    edges: &mut [Edge],
+    inlet: usize,
+    source: &Path,
+) -> Result<(Vec<Vec<usize>>, Vec<Option<usize>>)> {
+    let mut incident: Vec<Vec<usize>> = vec![vec![]; nodes.len()];
+    for (i, e) in edges.iter().enumerate() {
+        incident[e.ends[0]].push(i);
+        incident[e.ends[1]].push(i);
+    }
+    let mut children: Vec<Vec<usize>> = vec![vec![]; nodes.len()];
+    let mut parent: Vec<Option<usize>> = vec![None; nodes.len()];
+    let mut seen = vec![false; nodes.len()];
+    let mut used = vec![false; edges.len()];
+    let mut bfs = vec![inlet];
+    seen[inlet] = true;
+    let mut next = 0;
+    while next < bfs.len() {
+        let u = bfs[next];
+        next += 1;
+        for &e in &incident[u] {
+            if used[e] {
+                continue;
+            }
+            used[e] = true;
+            if edges[e].ends[1] == u {
+                edges[e].line = edges[e].line.reversed();
+                edges[e].ends.swap(0, 1);
+            }
+            let v = edges[e].ends[1];
+            if seen[v] {
+                let p = nodes[v].point;
+                return Err(Error::input(
+                    source,
+                    format!(
+                        "the centerlines form a closed loop: polyline {} reaches ({:.3}, {:.3}, {:.3}) mm, which the \
+                         tree already reaches another way from the inlet; a vessel tree has no loops, remove one \
+                         polyline of the loop",
+                        edges[e].source, p.x, p.y, p.z
+                    ),
+                ));
+            }
+            seen[v] = true;
+            parent[v] = Some(e);
+            children[u].push(e);
+            bfs.push(v);
+        }
+    }
+    if let Some(lost) = (0..edges.len()).find(|&e| !used[e]) {
+        let line = &edges[lost].line;
+        let gap =
+            |p| (0..edges.len()).filter(|&e| used[e]).map(|e| edges[e].line.closest(p).0).fold(f64::INFINITY, f64::min);
+        let (a, b) = (line.points[0], line.points[line.points.len() - 1]);
+        return Err(Error::input(
+            source,
+            format!(
+                "polyline {} (from ({:.3}, {:.3}, {:.3}) to ({:.3}, {:.3}, {:.3}) mm) does not connect to the others: \
+                 its ends are {:.3} and {:.3} mm from the nearest other polyline. Polylines must meet at a shared \
+                 point (or all start at the inlet)",
+                edges[lost].source,
+                a.x,
+                a.y,
+                a.z,
+                b.x,
+                b.y,
+                b.z,
+                gap(&a),
+                gap(&b)
+            ),
+        ));
+    }
+    Ok((children, parent))
 }
 
 /// Moves a merged junction `node` onto the segment it absorbed, the fraction `at` of its length

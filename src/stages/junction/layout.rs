@@ -103,7 +103,8 @@ impl Hull {
                     if n.norm() < 1e-14 {
                         continue;
                     }
-                    let side: Vec<f64> = (0..k).filter(|m| ![a, b, c].contains(m)).map(|m| n.dot(&(p[m] - p[a]))).collect();
+                    let side: Vec<f64> =
+                        (0..k).filter(|m| ![a, b, c].contains(m)).map(|m| n.dot(&(p[m] - p[a]))).collect();
                     if side.iter().all(|&s| s < 0.0) {
                         faces.push([a, b, c]);
                     } else if side.iter().all(|&s| s > 0.0) {
@@ -124,8 +125,10 @@ impl Hull {
                 next_of[v].push((a, b, f));
             }
         }
-        let mut edges: Vec<(usize, usize)> =
-            faces.iter().flat_map(|t| (0..3).map(move |r| (t[r].min(t[(r + 1) % 3]), t[r].max(t[(r + 1) % 3])))).collect();
+        let mut edges: Vec<(usize, usize)> = faces
+            .iter()
+            .flat_map(|t| (0..3).map(move |r| (t[r].min(t[(r + 1) % 3]), t[r].max(t[(r + 1) % 3]))))
+            .collect();
         edges.sort_unstable();
         edges.dedup();
         if edges.len() != 3 * k - 6 {

@@ -33,10 +33,10 @@
 pub mod blocks;
 pub mod layout;
 
-use crate::stages::junction::blocks::SectionTemplate;
-use crate::stages::centerline::{Branch, CenterlineSample, CenterlineTree, Frame};
 use crate::data::error::{Error, Result};
 use crate::geometry::surface::LumenSurface;
+use crate::stages::centerline::{Branch, CenterlineSample, CenterlineTree, Frame};
+use crate::stages::junction::blocks::SectionTemplate;
 use nalgebra::{Matrix3, Point3, Vector2, Vector3};
 use std::f64::consts::{PI, TAU};
 
@@ -1187,8 +1187,8 @@ mod tests {
         let surface = LumenSurface::new(&crate::testing::straight_tube_surface(3.0, 20.0, 48, 20)).unwrap();
         let members: Vec<(usize, bool)> = (0..6).map(|b| (b, b == 0)).collect();
         let centre = Point3::new(0.0, 0.0, 10.0);
-        let g = sectors_geometry(0, centre, 2.0, &members, &dirs, &[1.0; 6], &layout, &surface, &|| "x".into())
-            .unwrap();
+        let g =
+            sectors_geometry(0, centre, 2.0, &members, &dirs, &[1.0; 6], &layout, &surface, &|| "x".into()).unwrap();
         assert_folds_agree(&g);
         for slot in 0..6 {
             // Counter-clockwise about the tangent (out of the centre for a daughter, into it

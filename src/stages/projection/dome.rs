@@ -17,9 +17,9 @@
 //! as tall as wide on a hemispherical dome.
 
 use super::{cast_rays, cast_section, ProjectedSection};
-use crate::stages::junction::blocks::SectionTemplate;
-use crate::stages::centerline::CenterlineSample;
 use crate::geometry::surface::LumenSurface;
+use crate::stages::centerline::CenterlineSample;
+use crate::stages::junction::blocks::SectionTemplate;
 use nalgebra::{Point3, Vector2, Vector3};
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
 

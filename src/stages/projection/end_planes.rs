@@ -10,8 +10,8 @@
 //! capped 11 degrees off square, the 2.5 mm lost were nearly all of the 3 mm the trunk had left
 //! beside its junction.
 
-use crate::stages::centerline::{Branch, Frame};
 use crate::geometry::surface::LumenSurface;
+use crate::stages::centerline::{Branch, Frame};
 use nalgebra::{Point3, Vector3};
 
 /// Rays cast along the centerline towards a cap, from this fraction of the vessel's radius off
@@ -198,9 +198,13 @@ mod tests {
         let surface = crate::testing::tilted_cap_tube_surface(r, h, tilt);
         let centerlines = crate::testing::straight_tube_centerline(r, h);
         let config = crate::data::config::MeshConfig::preset(crate::data::config::Preset::Coarse);
-        let meshed =
-            crate::pipeline::mesh_vessel(&surface, &centerlines, &config, &mut crate::pipeline::progress::Progress::new(true, 9))
-                .expect("meshed");
+        let meshed = crate::pipeline::mesh_vessel(
+            &surface,
+            &centerlines,
+            &config,
+            &mut crate::pipeline::progress::Progress::new(true, 9),
+        )
+        .expect("meshed");
         let normal = Vector3::new(tilt.sin(), 0.0, -tilt.cos());
         let inlet = &meshed.mesh.node_sets[&crate::geometry::mesh::sets::lumen_end("inlet")];
         assert!(!inlet.is_empty());

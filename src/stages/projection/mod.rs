@@ -8,18 +8,18 @@
 //! must at least be *valid* (every ray hits from the inside), otherwise the run stops with the
 //! place and the cause.
 
-use crate::stages::junction::blocks::SectionTemplate;
-use crate::stages::centerline::{Branch, CenterlineSample};
-use crate::stages::projection::end_planes::EndCaps;
 use crate::data::error::{Error, Result};
-use crate::stages::junction::{transition_points, FoldEnd, JunctionGeometry, TransitionPoints};
 use crate::geometry::surface::LumenSurface;
+use crate::stages::centerline::{Branch, CenterlineSample};
+use crate::stages::junction::blocks::SectionTemplate;
+use crate::stages::junction::{transition_points, FoldEnd, JunctionGeometry, TransitionPoints};
+use crate::stages::projection::end_planes::EndCaps;
 use nalgebra::{Point3, Vector2, Vector3};
 use rayon::prelude::*;
 
 mod dome;
-pub mod plan;
 pub mod end_planes;
+pub mod plan;
 pub use dome::DomeTop;
 
 /// Hit triangles whose normal is within this cosine of the axis mark a cap (about 70 degrees
@@ -185,9 +185,7 @@ const RECENTRE_SPOKES: usize = 12;
 /// from inside (a consistently wound surface's first hit from inside faces away).
 fn inside_lumen(surface: &LumenSurface, p: &Point3<f64>, orientation: f64, reach: f64) -> bool {
     [Vector3::x(), Vector3::y(), Vector3::z(), -Vector3::x()].iter().all(|d| {
-        surface
-            .first_hit(p, d, reach)
-            .is_some_and(|h| surface.normals[h.triangle as usize].dot(d) * orientation > 0.0)
+        surface.first_hit(p, d, reach).is_some_and(|h| surface.normals[h.triangle as usize].dot(d) * orientation > 0.0)
     })
 }
 
@@ -345,85 +343,10 @@ pub fn project_branch(
             lo.max(length - hi)
         )));
     }
-    // Only the samples away from junctions decide where a vessel end is clean.
-    let inside: Vec<usize> = (0..samples.len()).filter(|&i| samples[i].s >= lo && samples[i].s <= hi).collect();
-    // Each probe, and for a section turned into a flat cap (`end_planes`) whether a ray ends on
-    // the cap's plane.
-    let cast: Vec<(usize, Probe, Option<bool>)> = inside
-        .par_iter()
-        .map(|&i| {
-            let (probe, section) = cast_section(template, surface, &samples[i], orient);
-            let cap = caps.turning_at(samples[i].s, length);
-            let on_cap = cap.map(|cap| section.surface.iter().any(|p| cap.holds(p)));
-            (i, probe, on_cap)
-        })
-        .collect();
-    // A closed end (every ray of the end sample hits) ...
-    let inlet_closed = start_junction.is_none() && cast.first().is_some_and(|c| c.1.valid());
-    let outlet_closed = end_junction.is_none() && cast.last().is_some_and(|c| c.1.valid());
-    // ... whose sections were not turned into a flat cap: a dome (or a square cap).
-    let dome_start = inlet_closed && caps.start.is_none();
-    let dome_end = outlet_closed && caps.end.is_none();
-    // A clean section meets the vessel's wall, not its end. A turned section meets the cap only
-    // where a ray ends on its plane, however steeply the wall flares from the cap; the others
-    // by the hit triangles' lean (see CAP_NORMAL_COS).
-    let mut clean = vec![false; samples.len()];
-    for (i, probe, on_cap) in &cast {
-        let s = samples[*i].s;
-        let limit = if (dome_start && s < 0.5 * length) || (dome_end && s >= 0.5 * length) {
-            DOME_NORMAL_COS
-        } else {
-            CAP_NORMAL_COS
-        };
-        clean[*i] = probe.valid()
-            && match on_cap {
-                Some(on_cap) => !on_cap,
-                None => probe.axial_normal < limit,
-            };
-    }
-    let probes: Vec<(usize, Probe)> = cast.into_iter().map(|(i, p, _)| (i, p)).collect();
-
-    // A junction end needs no clean section (no cap can be there): every section is checked
-    // valid below.
-    let first_clean = probes.iter().find(|(i, _)| clean[*i] || start_junction.is_some()).map(|(i, _)| *i);
-    let last_clean = probes.iter().rev().find(|(i, _)| clean[*i] || end_junction.is_some()).map(|(i, _)| *i);
-    let (i0, i1) = match (first_clean, last_clean) {
-        (Some(a), Some(b)) if a < b || (a == b && (start_junction.is_some() || end_junction.is_some())) => (a, b),
-        _ => {
-            let mid = &samples[samples.len() / 2];
-            let p = cast_section(template, surface, mid, orient).0;
-            return Err(Error::Geometry(format!(
-                "{}: no cross-section of branch {name} has all its rays meeting the lumen wall from inside (in the \
-                 middle of the centerline, {} {} of {} rays miss the surface and {} hit it from outside). The \
-                 centerline is not inside this surface: check that both files belong to the same vessel and are \
-                 in the same units (--units)",
-                surface.source.display(),
-                where_(mid),
-                p.misses,
-                template.ring_len(),
-                p.from_outside
-            )));
-        }
-    };
-    // A section that closes neither from the centerline nor from inside the lumen, in the half
-    // of the branch towards a vessel end, lies in a plane that crosses the end's opening (the
-    // vessel bends just before it): the mesh stops short of it on that side, at the next clean
-    // section (an end cut well short is said by its warning).
+    let Probed { probes, clean, inlet_closed, outlet_closed, dome_start, dome_end } =
+        probe_branch(branch, caps, setup, (lo, hi), start_junction.is_some(), end_junction.is_some());
+    let (i0, i1) = clean_span(branch, setup, &probes, &clean, start_junction.is_some(), end_junction.is_some())?;
     let closes = |i: usize, p: &Probe| p.valid() || recentred_section(template, surface, &samples[i], orient).0.valid();
-    let (mut i0, mut i1) = (i0, i1);
-    let half = 0.5 * length;
-    if start_junction.is_none() {
-        let bad = probes.iter().rev().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s < half && !closes(*i, p));
-        if let Some(next) = bad.and_then(|&(b, _)| probes.iter().find(|(i, _)| *i > b && clean[*i]).map(|c| c.0)) {
-            i0 = next.min(i1);
-        }
-    }
-    if end_junction.is_none() {
-        let bad = probes.iter().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s >= half && !closes(*i, p));
-        if let Some(prev) = bad.and_then(|&(b, _)| probes.iter().rev().find(|(i, _)| *i < b && clean[*i]).map(|c| c.0)) {
-            i1 = prev.max(i0);
-        }
-    }
     // A closed end keeps a margin from its cap, unless the sections were turned into the cap's
     // plane (they run parallel to it, clear of it).
     let r0 = samples[i0].radius;
@@ -476,8 +399,170 @@ pub fn project_branch(
         .map(|j| JunctionEnd { transition_length: if stub { s_start } else { j.transition_length }, ..*j });
     let end_junction = end_junction
         .map(|j| JunctionEnd { transition_length: if stub { length - s_end } else { j.transition_length }, ..*j });
-    let positions =
-        if stub { vec![s_start] } else { crate::stages::junction::blocks::station_positions(s_start, s_end, |s| spacing(&branch.at(s))) };
+    let positions = if stub {
+        vec![s_start]
+    } else {
+        crate::stages::junction::blocks::station_positions(s_start, s_end, |s| spacing(&branch.at(s)))
+    };
+    let ordinary = ordinary_sections(branch, setup, &positions)?;
+
+    let (out, start, end, dome) = join_ends(
+        branch,
+        setup,
+        ordinary,
+        start_junction.as_ref(),
+        end_junction.as_ref(),
+        inlet_closed,
+        outlet_closed,
+    )?;
+    Ok(ProjectedBranch {
+        branch: index,
+        sections: out,
+        s_start,
+        s_end,
+        start,
+        end,
+        inlet_closed,
+        outlet_closed,
+        normals_outward,
+        dome,
+    })
+}
+
+/// The probes of a branch's samples between `lo` and `hi` (away from its junctions), as
+/// [`project_branch`] decides where its vessel ends are clean.
+struct Probed {
+    /// Each sample's index and probe.
+    probes: Vec<(usize, Probe)>,
+    /// Per sample: its section meets the vessel's wall, not its end.
+    clean: Vec<bool>,
+    inlet_closed: bool,
+    outlet_closed: bool,
+    /// A closed end whose sections were not turned into a flat cap: a dome (or a square cap).
+    dome_start: bool,
+    dome_end: bool,
+}
+
+fn probe_branch(
+    branch: &Branch,
+    caps: &EndCaps,
+    setup: &ProjectionSetup,
+    (lo, hi): (f64, f64),
+    start_junction: bool,
+    end_junction: bool,
+) -> Probed {
+    let ProjectionSetup { template, surface, normals_outward, .. } = *setup;
+    let samples = &branch.samples;
+    let orient = if normals_outward { 1.0 } else { -1.0 };
+    let length = branch.length();
+    // Only the samples away from junctions decide where a vessel end is clean.
+    let inside: Vec<usize> = (0..samples.len()).filter(|&i| samples[i].s >= lo && samples[i].s <= hi).collect();
+    // Each probe, and for a section turned into a flat cap (`end_planes`) whether a ray ends on
+    // the cap's plane.
+    let cast: Vec<(usize, Probe, Option<bool>)> = inside
+        .par_iter()
+        .map(|&i| {
+            let (probe, section) = cast_section(template, surface, &samples[i], orient);
+            let cap = caps.turning_at(samples[i].s, length);
+            let on_cap = cap.map(|cap| section.surface.iter().any(|p| cap.holds(p)));
+            (i, probe, on_cap)
+        })
+        .collect();
+    // A closed end (every ray of the end sample hits) ...
+    let inlet_closed = !start_junction && cast.first().is_some_and(|c| c.1.valid());
+    let outlet_closed = !end_junction && cast.last().is_some_and(|c| c.1.valid());
+    // ... whose sections were not turned into a flat cap: a dome (or a square cap).
+    let dome_start = inlet_closed && caps.start.is_none();
+    let dome_end = outlet_closed && caps.end.is_none();
+    // A clean section meets the vessel's wall, not its end. A turned section meets the cap only
+    // where a ray ends on its plane, however steeply the wall flares from the cap; the others
+    // by the hit triangles' lean (see CAP_NORMAL_COS).
+    let mut clean = vec![false; samples.len()];
+    for (i, probe, on_cap) in &cast {
+        let s = samples[*i].s;
+        let limit = if (dome_start && s < 0.5 * length) || (dome_end && s >= 0.5 * length) {
+            DOME_NORMAL_COS
+        } else {
+            CAP_NORMAL_COS
+        };
+        clean[*i] = probe.valid()
+            && match on_cap {
+                Some(on_cap) => !on_cap,
+                None => probe.axial_normal < limit,
+            };
+    }
+    let probes: Vec<(usize, Probe)> = cast.into_iter().map(|(i, p, _)| (i, p)).collect();
+
+    Probed { probes, clean, inlet_closed, outlet_closed, dome_start, dome_end }
+}
+
+/// The first and last sample of the stretch to mesh between clean sections, stopped short of
+/// a section that closes neither from the centerline nor from inside the lumen in the half of
+/// the branch towards a vessel end. An error when no section of the branch is clean.
+fn clean_span(
+    branch: &Branch,
+    setup: &ProjectionSetup,
+    probes: &[(usize, Probe)],
+    clean: &[bool],
+    start_junction: bool,
+    end_junction: bool,
+) -> Result<(usize, usize)> {
+    let ProjectionSetup { template, surface, normals_outward, .. } = *setup;
+    let samples = &branch.samples;
+    let orient = if normals_outward { 1.0 } else { -1.0 };
+    let length = branch.length();
+    let name = &branch.name;
+    // A junction end needs no clean section (no cap can be there): every section is checked
+    // valid below.
+    let first_clean = probes.iter().find(|(i, _)| clean[*i] || start_junction).map(|(i, _)| *i);
+    let last_clean = probes.iter().rev().find(|(i, _)| clean[*i] || end_junction).map(|(i, _)| *i);
+    let (i0, i1) = match (first_clean, last_clean) {
+        (Some(a), Some(b)) if a < b || (a == b && (start_junction || end_junction)) => (a, b),
+        _ => {
+            let mid = &samples[samples.len() / 2];
+            let p = cast_section(template, surface, mid, orient).0;
+            return Err(Error::Geometry(format!(
+                "{}: no cross-section of branch {name} has all its rays meeting the lumen wall from inside (in the \
+                 middle of the centerline, {} {} of {} rays miss the surface and {} hit it from outside). The \
+                 centerline is not inside this surface: check that both files belong to the same vessel and are \
+                 in the same units (--units)",
+                surface.source.display(),
+                where_(mid),
+                p.misses,
+                template.ring_len(),
+                p.from_outside
+            )));
+        }
+    };
+    // A section that closes neither from the centerline nor from inside the lumen, in the half
+    // of the branch towards a vessel end, lies in a plane that crosses the end's opening (the
+    // vessel bends just before it): the mesh stops short of it on that side, at the next clean
+    // section (an end cut well short is said by its warning).
+    let closes = |i: usize, p: &Probe| p.valid() || recentred_section(template, surface, &samples[i], orient).0.valid();
+    let (mut i0, mut i1) = (i0, i1);
+    let half = 0.5 * length;
+    if !start_junction {
+        let bad = probes.iter().rev().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s < half && !closes(*i, p));
+        if let Some(next) = bad.and_then(|&(b, _)| probes.iter().find(|(i, _)| *i > b && clean[*i]).map(|c| c.0)) {
+            i0 = next.min(i1);
+        }
+    }
+    if !end_junction {
+        let bad = probes.iter().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s >= half && !closes(*i, p));
+        if let Some(prev) = bad.and_then(|&(b, _)| probes.iter().rev().find(|(i, _)| *i < b && clean[*i]).map(|c| c.0))
+        {
+            i1 = prev.max(i0);
+        }
+    }
+    Ok((i0, i1))
+}
+
+/// The ordinary sections at `positions` along the branch; an error names the first that does
+/// not close.
+fn ordinary_sections(branch: &Branch, setup: &ProjectionSetup, positions: &[f64]) -> Result<Vec<ProjectedSection>> {
+    let ProjectionSetup { template, surface, normals_outward, .. } = *setup;
+    let orient = if normals_outward { 1.0 } else { -1.0 };
+    let name = &branch.name;
     let sections: Vec<(Probe, ProjectedSection)> =
         positions.par_iter().map(|&s| ordinary_section(template, surface, &branch.at(s), orient)).collect();
     let mut ordinary = Vec::with_capacity(sections.len());
@@ -495,6 +580,23 @@ pub fn project_branch(
         ordinary.push(section);
     }
 
+    Ok(ordinary)
+}
+
+/// The branch's sections with its ends added: the transitions down to each junction's fold,
+/// and the dome closing a blind end; with what lies at each end.
+fn join_ends(
+    branch: &Branch,
+    setup: &ProjectionSetup,
+    ordinary: Vec<ProjectedSection>,
+    start_junction: Option<&JunctionEnd>,
+    end_junction: Option<&JunctionEnd>,
+    inlet_closed: bool,
+    outlet_closed: bool,
+) -> Result<(Vec<ProjectedSection>, BranchEnd, BranchEnd, Option<DomeTop>)> {
+    let ProjectionSetup { template, surface, spacing, normals_outward, .. } = *setup;
+    let orient = if normals_outward { 1.0 } else { -1.0 };
+    let name = &branch.name;
     let mut out = Vec::new();
     if let Some(j) = &start_junction {
         let mut t = transition(j, &ordinary[0], -1.0, setup, branch)?;
@@ -529,18 +631,7 @@ pub fn project_branch(
         }
         None => BranchEnd::Vessel { closed: outlet_closed },
     };
-    Ok(ProjectedBranch {
-        branch: index,
-        sections: out,
-        s_start,
-        s_end,
-        start,
-        end,
-        inlet_closed,
-        outlet_closed,
-        normals_outward,
-        dome,
-    })
+    Ok((out, start, end, dome))
 }
 
 /// Whether a branch between two junctions is a bridge (see [`bridge`]): the plan gives each

@@ -12,7 +12,9 @@ use crate::stages::junction::{
     FoldEnd, JunctionGeometry, LayoutPolicy,
 };
 use crate::stages::projection::end_planes::EndCaps;
-use crate::stages::projection::{clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup};
+use crate::stages::projection::{
+    clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup,
+};
 use nalgebra::Point3;
 
 /// A branch ready for projection: its frames turned to meet its junctions' folds, and what
@@ -188,8 +190,7 @@ pub fn project_tree(
         .collect();
     let sacs = name_sacs(tree, &config.centerline.sacs_mm);
     let spacing = |s: &CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
-    let junction_spacing =
-        |s: &CenterlineSample| l.junction_axial_spacing.map_or_else(|| spacing(s), |k| k * s.radius);
+    let junction_spacing = |s: &CenterlineSample| l.junction_axial_spacing.map_or_else(|| spacing(s), |k| k * s.radius);
     let setup_of = |b: usize| ProjectionSetup {
         template: &templates[b],
         surface: lumen_surface,

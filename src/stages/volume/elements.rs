@@ -3,7 +3,9 @@
 
 use super::numbering::{top_hex, Numbering};
 use super::RadialLevels;
-use crate::geometry::mesh::{sets, ElementFace, Hex, Region, VesselEnd, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER, FACE_UPSTREAM};
+use crate::geometry::mesh::{
+    sets, ElementFace, Hex, Region, VesselEnd, FACE_DOWNSTREAM, FACE_INNER, FACE_OUTER, FACE_UPSTREAM,
+};
 use crate::stages::projection::{BranchEnd, ProjectedBranch};
 use indexmap::IndexMap;
 use nalgebra::Vector3;

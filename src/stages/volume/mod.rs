@@ -12,14 +12,14 @@ mod numbering;
 pub mod surface_smoothing;
 pub mod wall_directions;
 
-use crate::stages::junction::blocks::SectionTemplate;
 use crate::data::config::WallGrowth;
-use crate::stages::junction::JunctionGeometry;
 use crate::geometry::mesh::{sets, Hex, Region, VesselMesh, WallLayer, HEX_EDGES};
-use crate::stages::volume::node_optimisation::{optimise_nodes, Freedom, PYRAMID_TARGET};
-use crate::stages::projection::ProjectedBranch;
 use crate::geometry::quality::Validity;
 use crate::geometry::surface::LumenSurface;
+use crate::stages::junction::blocks::SectionTemplate;
+use crate::stages::junction::JunctionGeometry;
+use crate::stages::projection::ProjectedBranch;
+use crate::stages::volume::node_optimisation::{optimise_nodes, Freedom, PYRAMID_TARGET};
 use crate::stages::volume::surface_smoothing::{smooth_on_surface, RayNode, SmoothedNode};
 use crate::stages::volume::wall_directions::{surface_normals, SurfaceGraph, JUNCTION_SMOOTHING_PASSES};
 use elements::{
@@ -426,46 +426,8 @@ fn improve_junction_nodes(
     if free.is_empty() {
         return;
     }
-    let mut incident: HashMap<u32, Vec<usize>> = HashMap::new();
-    let mut neighbours: HashMap<u32, Vec<u32>> = HashMap::new();
-    for (e, h) in lumen.iter().enumerate() {
-        for (c, &n) in h.iter().enumerate() {
-            if movable[n as usize] != Freedom::Fixed {
-                incident.entry(n).or_default().push(e);
-                let nb = neighbours.entry(n).or_default();
-                for &[a, b] in HEX_EDGES.iter() {
-                    if a == c {
-                        nb.push(h[b]);
-                    } else if b == c {
-                        nb.push(h[a]);
-                    }
-                }
-            }
-        }
-    }
-    for nb in neighbours.values_mut() {
-        nb.sort_unstable();
-        nb.dedup();
-    }
-    // A surface node's neighbours along the surface: the other corners of its outer faces
-    // that share an edge with it.
-    let on_outer_face: HashMap<u32, Vec<u32>> = free
-        .iter()
-        .filter(|&&n| movable[n as usize] == Freedom::OnSurface)
-        .map(|&n| {
-            let mut nb: Vec<u32> = Vec::new();
-            for &e in &incident[&n] {
-                let outer = crate::geometry::mesh::face_nodes(&lumen[e], crate::geometry::mesh::FACE_OUTER);
-                if let Some(at) = outer.iter().position(|&x| x == n) {
-                    nb.push(outer[(at + 1) % 4]);
-                    nb.push(outer[(at + 3) % 4]);
-                }
-            }
-            nb.sort_unstable();
-            nb.dedup();
-            (n, nb)
-        })
-        .collect();
+    let Neighbourhood { incident, neighbours, on_outer_face, corners, all_incident } =
+        neighbourhood(lumen, movable, &free);
     // The worst element, each by its `validity`, or, once it is at most `floor`, some value at
     // most `floor`: a trial move is only ever compared with a floor.
     // `first`, the element that was worst before the move, is measured first: a move that
@@ -493,26 +455,9 @@ fn improve_junction_nodes(
             })
             .fold(f64::INFINITY, f64::min)
     };
-    // A node tried without moving gives the same answer again until a corner of one of its
-    // elements moves, so it is skipped until then (the result is the same as trying it).
-    let corners: HashMap<u32, Vec<u32>> = free
-        .iter()
-        .map(|&n| {
-            let mut c: Vec<u32> = incident[&n].iter().flat_map(|&e| lumen[e]).filter(|&x| x != n).collect();
-            c.sort_unstable();
-            c.dedup();
-            (n, c)
-        })
-        .collect();
     let mut moves: u64 = 0;
     let mut moved_at: HashMap<u32, u64> = HashMap::new();
     let mut still_since: HashMap<u32, u64> = HashMap::new();
-    let all_incident: Vec<usize> = {
-        let mut v: Vec<usize> = incident.values().flatten().copied().collect();
-        v.sort_unstable();
-        v.dedup();
-        v
-    };
     // The worst element after each sweep past OPTIMISATION_SWEEPS.
     let mut worst_after: Vec<f64> = Vec::new();
     for sweep in 0..MAX_OPTIMISATION_SWEEPS {
@@ -589,6 +534,80 @@ fn improve_junction_nodes(
             break;
         }
     }
+}
+
+/// The lumen around the movable nodes, as [`improve_junction_nodes`] walks it.
+struct Neighbourhood {
+    /// Each movable node's elements.
+    incident: HashMap<u32, Vec<usize>>,
+    /// Each movable node's edge neighbours.
+    neighbours: HashMap<u32, Vec<u32>>,
+    /// A surface node's neighbours along the surface: the other corners of its outer faces
+    /// that share an edge with it.
+    on_outer_face: HashMap<u32, Vec<u32>>,
+    /// The other corners of each movable node's elements: a node tried without moving gives
+    /// the same answer again until one of them moves, so it is skipped until then (the result
+    /// is the same as trying it).
+    corners: HashMap<u32, Vec<u32>>,
+    /// Every element with a movable corner, sorted.
+    all_incident: Vec<usize>,
+}
+
+fn neighbourhood(lumen: &[Hex], movable: &[Freedom], free: &[u32]) -> Neighbourhood {
+    let mut incident: HashMap<u32, Vec<usize>> = HashMap::new();
+    let mut neighbours: HashMap<u32, Vec<u32>> = HashMap::new();
+    for (e, h) in lumen.iter().enumerate() {
+        for (c, &n) in h.iter().enumerate() {
+            if movable[n as usize] != Freedom::Fixed {
+                incident.entry(n).or_default().push(e);
+                let nb = neighbours.entry(n).or_default();
+                for &[a, b] in HEX_EDGES.iter() {
+                    if a == c {
+                        nb.push(h[b]);
+                    } else if b == c {
+                        nb.push(h[a]);
+                    }
+                }
+            }
+        }
+    }
+    for nb in neighbours.values_mut() {
+        nb.sort_unstable();
+        nb.dedup();
+    }
+    let on_outer_face: HashMap<u32, Vec<u32>> = free
+        .iter()
+        .filter(|&&n| movable[n as usize] == Freedom::OnSurface)
+        .map(|&n| {
+            let mut nb: Vec<u32> = Vec::new();
+            for &e in &incident[&n] {
+                let outer = crate::geometry::mesh::face_nodes(&lumen[e], crate::geometry::mesh::FACE_OUTER);
+                if let Some(at) = outer.iter().position(|&x| x == n) {
+                    nb.push(outer[(at + 1) % 4]);
+                    nb.push(outer[(at + 3) % 4]);
+                }
+            }
+            nb.sort_unstable();
+            nb.dedup();
+            (n, nb)
+        })
+        .collect();
+    let corners: HashMap<u32, Vec<u32>> = free
+        .iter()
+        .map(|&n| {
+            let mut c: Vec<u32> = incident[&n].iter().flat_map(|&e| lumen[e]).filter(|&x| x != n).collect();
+            c.sort_unstable();
+            c.dedup();
+            (n, c)
+        })
+        .collect();
+    let all_incident: Vec<usize> = {
+        let mut v: Vec<usize> = incident.values().flatten().copied().collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    Neighbourhood { incident, neighbours, on_outer_face, corners, all_incident }
 }
 
 /// Records, for each surface node of a section, the ring nodes on its ray (once: a page's
@@ -845,8 +864,8 @@ mod tests {
         let mut fresh = vec![Validity::Corners; 2];
         assert!(watch(&free, Validity::CornersAndPyramids, &mut fresh).is_empty(), "no free node");
     }
-    use crate::stages::centerline::CenterlineTree;
     use crate::data::config::MeshConfig;
+    use crate::stages::centerline::CenterlineTree;
     use crate::stages::projection::{project_branch, ProjectionSetup};
     use crate::testing::{straight_tube_centerline, straight_tube_surface};
 

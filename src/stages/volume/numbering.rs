@@ -3,11 +3,11 @@
 //! the wall nodes above each lumen-surface node.
 
 use super::{add_columns, JunctionOptimisation, RadialLevels};
+use crate::geometry::mesh::Hex;
 use crate::stages::junction::blocks::SectionTemplate;
 use crate::stages::junction::{FoldKey, JunctionGeometry};
-use crate::geometry::mesh::Hex;
-use crate::stages::volume::node_optimisation::Freedom;
 use crate::stages::projection::{BranchEnd, DomeTop, ProjectedBranch};
+use crate::stages::volume::node_optimisation::Freedom;
 use crate::stages::volume::surface_smoothing::RayNode;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};

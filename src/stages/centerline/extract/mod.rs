@@ -62,8 +62,8 @@ pub use ends::{find_caps, names_of_ends, Cap, EndKind, Hole, InletChoice, Vessel
 pub use split::branch_split;
 
 use crate::data::error::{Error, Result};
-use crate::io::input::{topology, CenterlinePolyline, Centerlines, NamedCap, TriangleSurface};
 use crate::geometry::surface::LumenSurface;
+use crate::io::input::{topology, CenterlinePolyline, Centerlines, NamedCap, TriangleSurface};
 use indexmap::IndexMap;
 use medial::{Ball, BallGraph};
 use nalgebra::{Point3, Vector3};

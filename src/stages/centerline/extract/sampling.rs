@@ -5,8 +5,8 @@
 //! vessel is wide, as coarse STL exports have) leave gaps through which the Voronoi diagram of
 //! the vertices alone escapes.
 
-use crate::io::input::topology::vertex_normals;
 use crate::geometry::surface::LumenSurface;
+use crate::io::input::topology::vertex_normals;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use std::collections::HashMap;

@@ -11,8 +11,8 @@
 //! the region VMTK blanks (from the touching sphere to the tube exit) to within a fraction of a
 //! radius, and it keeps the centre inside the blanked tract, so a reader can find it again.
 
-use crate::stages::centerline::{Branch, CenterlineTree};
 use crate::io::input::{CenterlinePolyline, Centerlines};
+use crate::stages::centerline::{Branch, CenterlineTree};
 use indexmap::IndexMap;
 use std::path::Path;
 
