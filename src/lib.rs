@@ -1,7 +1,7 @@
 //! vesselhex: structured hexahedral meshes of blood vessels (lumen O-grid + three-layer wall)
 //! for Abaqus, CalculiX, FEBio, OpenFOAM and FSI, after De Santis et al. 2011.
 //!
-//! The crate is built in layers; each imports only the layers below it (docs/architecture.md,
+//! The crate is built in layers; each imports only the layers below it (docs/ARCHITECTURE.md,
 //! kept by tests/architecture.rs):
 //!
 //! 1. [`data`]: units, errors, warnings, the vessel's regions, the configuration;
