@@ -656,6 +656,10 @@ const FOLD_MARGIN: f64 = 0.25;
 /// Largest curvature of the centerline where ordinary sections may stand, times the radius
 /// (a radius of curvature of two vessel radii).
 const MAX_BEND: f64 = 0.5;
+/// Largest curvature, times the radius, at which neighbouring sections of the vessel's radius do
+/// not cross inside the lumen (a radius of curvature of one vessel radius): where no section
+/// past a junction stands on a gentle bend, the last ordinary one may stand on one up to this.
+const MAX_BEND_UNCROSSED: f64 = 1.0;
 /// Length over which the curvature is measured, in radii.
 const BEND_BASE: f64 = 1.0;
 /// How far beyond the estimate the search for a clear section goes, in branch radii.
@@ -698,10 +702,10 @@ pub fn clear_transition_length(
     // Ordinary sections are planes across the centerline: where it bends on a radius of
     // curvature near the vessel's radius (it often swings towards the junction centre in its
     // last radius or two), neighbouring sections cross on the inner side of the bend.
-    let gentle_bend = |d: f64| {
+    let gentle_bend = |d: f64, max_bend: f64| {
         let half = 0.5 * BEND_BASE * r;
         let (a, b) = (at(d - half).frame.tangent, at(d + half).frame.tangent);
-        a.angle(&b) * r / (2.0 * half) <= MAX_BEND
+        a.angle(&b) * r / (2.0 * half) <= max_bend
     };
     // The folded end lies on the slot's two pages and the spine: where those meet the wall (the
     // crotches and the spine's ends) must lie ahead of the last ordinary section, or the
@@ -713,9 +717,9 @@ pub fn clear_transition_length(
         fold_wall.iter().all(|w| (w - st.point).dot(&towards) >= FOLD_MARGIN * r)
     };
     // The geometric test first: it costs nothing next to twelve sets of rays.
-    let clear = |d: f64| {
+    let clear = |d: f64, max_bend: f64| {
         let base = at(d);
-        gentle_bend(d)
+        gentle_bend(d, max_bend)
             && (0..CLEAR_TURNS).all(|t| {
                 let phi = spacing_angle * t as f64;
                 let f = base.frame;
@@ -734,16 +738,25 @@ pub fn clear_transition_length(
     // clear. A branch that curls back past the junction's level (palabos_cerebral_aneurysm: an
     // outlet leaving a sac 14 mm in radius turns back down by 30 mm) puts the spine's ends
     // behind its later sections, which asked of them too left no section anywhere.
-    let last_section = |d: f64| {
+    let last_section = |d: f64, max_bend: f64| {
         fold_ahead(d)
-            && (0..=CLEAR_RUN_STEPS).map(|k| d + k as f64 * step).filter(|&x| x == d || x <= run_reach).all(clear)
+            && (0..=CLEAR_RUN_STEPS)
+                .map(|k| d + k as f64 * step)
+                .filter(|&x| x == d || x <= run_reach)
+                .all(|x| clear(x, max_bend))
     };
-    let mut d = estimate;
-    while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len && d <= reach {
-        if last_section(d) {
-            return Ok(Some(d));
+    let search = |max_bend: f64| {
+        let mut d = estimate;
+        while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len && d <= reach {
+            if last_section(d, max_bend) {
+                return Some(d);
+            }
+            d += step;
         }
-        d += step;
+        None
+    };
+    if let Some(d) = search(MAX_BEND) {
+        return Ok(Some(d));
     }
     // Between two junctions, no clear section in this junction's half: the branch is a bridge.
     if far_junction {
@@ -753,10 +766,16 @@ pub fn clear_transition_length(
     // junction, a clear section gives a steeper transition, but a mesh.
     let mut d = reach;
     while setup.steep_short_branches && estimate > reach && d >= NEAREST_SECTION * r {
-        if last_section(d) {
+        if last_section(d, MAX_BEND) {
             return Ok(Some(d));
         }
         d -= step;
+    }
+    // A bend tighter than the gentle one just past the junction, and the fold behind the
+    // sections beyond it (a branch curling back): the bend that stops sections crossing inside
+    // the lumen will do, and the elements decide.
+    if let Some(d) = search(MAX_BEND_UNCROSSED) {
+        return Ok(Some(d));
     }
     let place = format!(
         "{}: branch {} ({len:.1} mm long) at the junction at ({:.3}, {:.3}, {:.3}) mm",

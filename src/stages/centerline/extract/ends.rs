@@ -53,8 +53,21 @@ pub struct VesselEnd {
     pub kind: EndKind,
 }
 
-/// A cap must be flat to this fraction of its equivalent radius.
+/// A cap must be flat to this fraction of its equivalent radius ...
 const CAP_FLATNESS: f64 = 0.02;
+/// ... beyond its rim's own distance from its plane, for a cap a sharp rim bounds, when that
+/// rim lies within this fraction of the radius of a plane. A cap closes the rim it is given:
+/// a rim of twenty points on a tube cut by hand strays from a plane by a few percent of the
+/// radius, and a cap's triangles strung across it cannot be flatter than it.
+const RIM_FLATNESS: f64 = 0.1;
+
+/// How flat a disc must be: within [`CAP_FLATNESS`] of a plane, or of its rim (see
+/// [`RIM_FLATNESS`]).
+#[derive(Clone, Copy)]
+enum Flatness {
+    Plane,
+    AsItsRim,
+}
 /// ... and round enough: isoperimetric quotient 4 pi A / L^2 above this (1 for a circle).
 const CAP_ROUNDNESS: f64 = 0.5;
 /// Triangles grown into one planar region have normals within this angle (cosine).
@@ -66,6 +79,11 @@ const REGION_COS: f64 = 0.9994; // 2 degrees
 pub const CAP_SPAN: f64 = 0.4;
 /// A cut cap's rim is sharp: every rim edge turns by more than 30 degrees (cosine).
 const RIM_COS: f64 = 0.866;
+/// A cap found by its rim alone, whatever the lean of its triangles, is bounded by edges that
+/// turn by at least 60 degrees (cosine): a vessel cut square turns by about 90 degrees all round,
+/// while the creases of a rough wall, which may enclose a few flat-looking triangles, turn less.
+/// (A cap cut obliquely, whose rim turns less in places, is found as a planar region.)
+const CUT_RIM_COS: f64 = 0.5;
 
 /// A flat region that may close a vessel: its triangles, the end it would make, and whether
 /// its rim is sharp all around (a cut) or rounded (a blunt end).
@@ -77,12 +95,13 @@ pub struct Cap {
 }
 
 /// The flat regions that may close a vessel: the tag values whose triangles form a flat disc
-/// (tagged caps, taken as they are, with a sharp rim), or, without such tags, planar regions
-/// that form a flat, round disc (see [`flat_disc`]), their rims sharp or rounded. Which of them
-/// are ends is for the caller to judge against the vessel behind them.
+/// (tagged caps, taken as they are, with a sharp rim), or, without such tags, regions that form
+/// a flat, round disc (see [`flat_disc`]): those a sharp rim bounds, then planar ones among the
+/// rest, their rims sharp or rounded. Which of them are ends is for the caller to judge against
+/// the vessel behind them.
 pub fn find_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: Option<&[i64]>) -> Vec<Cap> {
-    let disc = |tris: &[u32], tag: Option<i64>, sharp_rim: bool| -> Option<Cap> {
-        let (centre, radius) = flat_disc(vertices, triangles, tris)?;
+    let disc = |tris: &[u32], tag: Option<i64>, sharp_rim: bool, rim: Flatness| -> Option<Cap> {
+        let (centre, radius) = flat_disc(vertices, triangles, tris, rim)?;
         let end = VesselEnd { centre, radius, kind: EndKind::Cap { tag } };
         Some(Cap { triangles: tris.to_vec(), end, sharp_rim })
     };
@@ -92,17 +111,34 @@ pub fn find_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: Option<
         let caps: Vec<Cap> = groups
             .into_iter()
             .filter(|(_, g)| 2 * g.len() < triangles.len())
-            .filter_map(|(tag, g)| disc(&g, Some(tag), true))
+            .filter_map(|(tag, g)| disc(&g, Some(tag), true, Flatness::Plane))
             .collect();
         if !caps.is_empty() {
             return caps;
         }
     }
-    planar_regions(vertices, triangles)
-        .into_iter()
-        .filter(|(r, _)| 2 * r.len() < triangles.len())
-        .filter_map(|(r, sharp)| disc(&r, None, sharp))
-        .collect()
+    // A cut cap first: the region its sharp rim bounds, however its triangles lean within it (a
+    // fine cap over a rim that is not quite planar bends by more than the planar regions' 2
+    // degrees near the rim, and would fall apart into pieces none of which spans the vessel).
+    let edges = RegionSurface::new(vertices, triangles);
+    let mut taken = vec![false; triangles.len()];
+    let mut caps: Vec<(u32, Cap)> = vec![];
+    let candidates = |regions: Vec<(Vec<u32>, bool)>| {
+        regions.into_iter().filter(|(r, _)| 2 * r.len() < triangles.len()).collect::<Vec<_>>()
+    };
+    for (r, _) in candidates(edges.regions(&taken, |_, t, u| edges.smooth_edge(t, u))) {
+        if let Some(cap) = disc(&r, None, true, Flatness::AsItsRim) {
+            r.iter().for_each(|&t| taken[t as usize] = true);
+            caps.push((r[0], cap));
+        }
+    }
+    // Then planar regions (a blunt end's face, its rim rounded), among the triangles left.
+    for (r, sharp) in candidates(edges.regions(&taken, |seed, _, u| edges.planar_with(seed, u))) {
+        caps.extend(disc(&r, None, sharp, Flatness::Plane).map(|cap| (r[0], cap)));
+    }
+    // In the order of their first triangles, whichever way each was found.
+    caps.sort_by_key(|(first, _)| *first);
+    caps.into_iter().map(|(_, cap)| cap).collect()
 }
 
 fn unit_normal(vertices: &[Point3<f64>], t: &[u32; 3]) -> Vector3<f64> {
@@ -110,52 +146,79 @@ fn unit_normal(vertices: &[Point3<f64>], t: &[u32; 3]) -> Vector3<f64> {
     (b - a).cross(&(c - a)).try_normalize(0.0).unwrap_or_default()
 }
 
-/// Regions grown across manifold edges from each unvisited triangle (in index order) while the
-/// normals stay within 2 degrees of the seed's, kept when at least 4 triangles and bounded by
-/// no open edge; each with whether every rim edge is sharp (see [`RIM_COS`]).
-fn planar_regions(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<(Vec<u32>, bool)> {
-    let neighbours = triangle_neighbours(triangles);
-    let normals: Vec<Vector3<f64>> = triangles.iter().map(|t| unit_normal(vertices, t)).collect();
-    let mut region_of = vec![u32::MAX; triangles.len()];
-    let mut regions = vec![];
-    for seed in 0..triangles.len() {
-        if region_of[seed] != u32::MAX || normals[seed] == Vector3::zeros() {
-            continue;
-        }
-        let id = regions.len() as u32;
-        let mut members = vec![seed as u32];
-        region_of[seed] = id;
-        let mut k = 0;
-        while k < members.len() {
-            let t = members[k] as usize;
-            k += 1;
-            for &u in &neighbours[t] {
-                if u < NON_MANIFOLD
-                    && region_of[u as usize] == u32::MAX
-                    && normals[u as usize].dot(&normals[seed]) > REGION_COS
-                {
-                    region_of[u as usize] = id;
-                    members.push(u);
+/// The triangles' normals and neighbours, for growing regions across manifold edges.
+struct RegionSurface {
+    neighbours: Vec<[u32; 3]>,
+    normals: Vec<Vector3<f64>>,
+}
+
+impl RegionSurface {
+    fn new(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> RegionSurface {
+        let neighbours = triangle_neighbours(triangles);
+        let normals = triangles.iter().map(|t| unit_normal(vertices, t)).collect();
+        RegionSurface { neighbours, normals }
+    }
+
+    /// Whether `u`'s normal lies within 2 degrees of the region's seed's.
+    fn planar_with(&self, seed: usize, u: usize) -> bool {
+        self.normals[u].dot(&self.normals[seed]) > REGION_COS
+    }
+
+    /// Whether the edge between neighbours `t` and `u` turns by less than a cut's rim (see
+    /// [`CUT_RIM_COS`]; a degenerate triangle, with no normal, goes with its neighbours).
+    fn smooth_edge(&self, t: usize, u: usize) -> bool {
+        let (a, b) = (self.normals[t], self.normals[u]);
+        a == Vector3::zeros() || b == Vector3::zeros() || a.dot(&b) > CUT_RIM_COS
+    }
+
+    /// Regions grown across manifold edges from each triangle neither taken nor yet in a region
+    /// (in index order, so a region's first triangle is its seed), joining a neighbour `u` of a
+    /// member `t` when `joins(seed, t, u)`; kept when at least 4 triangles and bounded by no
+    /// open edge, each with whether every rim edge is sharp (see [`RIM_COS`]).
+    fn regions(&self, taken: &[bool], joins: impl Fn(usize, usize, usize) -> bool) -> Vec<(Vec<u32>, bool)> {
+        let (neighbours, normals) = (&self.neighbours, &self.normals);
+        let mut region_of = vec![u32::MAX; normals.len()];
+        let mut regions = vec![];
+        for seed in 0..normals.len() {
+            if region_of[seed] != u32::MAX || taken[seed] || normals[seed] == Vector3::zeros() {
+                continue;
+            }
+            let id = regions.len() as u32;
+            let mut members = vec![seed as u32];
+            region_of[seed] = id;
+            let mut k = 0;
+            while k < members.len() {
+                let t = members[k] as usize;
+                k += 1;
+                for &u in &neighbours[t] {
+                    if u < NON_MANIFOLD
+                        && region_of[u as usize] == u32::MAX
+                        && !taken[u as usize]
+                        && joins(seed, t, u as usize)
+                    {
+                        region_of[u as usize] = id;
+                        members.push(u);
+                    }
                 }
             }
+            regions.push(members);
         }
-        regions.push(members);
+        regions
+            .into_iter()
+            .enumerate()
+            .filter(|(_, r)| r.len() >= 4 && r.iter().all(|&t| neighbours[t as usize].iter().all(|&u| u != BOUNDARY)))
+            .map(|(id, r)| {
+                let sharp = r.iter().all(|&t| {
+                    neighbours[t as usize].iter().all(|&u| {
+                        u == NON_MANIFOLD
+                            || region_of[u as usize] == id as u32
+                            || normals[u as usize].dot(&normals[t as usize]).abs() < RIM_COS
+                    })
+                });
+                (r, sharp)
+            })
+            .collect()
     }
-    regions
-        .into_iter()
-        .enumerate()
-        .filter(|(_, r)| r.len() >= 4 && r.iter().all(|&t| neighbours[t as usize].iter().all(|&u| u != BOUNDARY)))
-        .map(|(id, r)| {
-            let sharp = r.iter().all(|&t| {
-                neighbours[t as usize].iter().all(|&u| {
-                    u == NON_MANIFOLD
-                        || region_of[u as usize] == id as u32
-                        || normals[u as usize].dot(&normals[t as usize]).abs() < RIM_COS
-                })
-            });
-            (r, sharp)
-        })
-        .collect()
 }
 
 /// The caps given in files of their own and joined to the wall (their triangles tagged, see
@@ -219,7 +282,7 @@ const NAMED_END_REACH: f64 = 1.0;
 
 /// The centre and equivalent radius of the triangles when they form a flat, roughly round disc
 /// bounded by a single loop.
-fn flat_disc(vertices: &[Point3<f64>], triangles: &[[u32; 3]], subset: &[u32]) -> Option<(Point3<f64>, f64)> {
+fn flat_disc(vertices: &[Point3<f64>], triangles: &[[u32; 3]], subset: &[u32], rim: Flatness) -> Option<(Point3<f64>, f64)> {
     let tris: Vec<[u32; 3]> = subset.iter().map(|&t| triangles[t as usize]).collect();
     let loops = boundary_loops(&tris);
     let [lp] = loops.as_slice() else { return None };
@@ -229,8 +292,15 @@ fn flat_disc(vertices: &[Point3<f64>], triangles: &[[u32; 3]], subset: &[u32]) -
     let radius = (area / std::f64::consts::PI).sqrt();
     let perimeter: f64 =
         (0..lp.len()).map(|i| (vertices[lp[(i + 1) % lp.len()] as usize] - vertices[lp[i] as usize]).norm()).sum();
-    let flat =
-        tris.iter().flatten().all(|&v| (vertices[v as usize] - centre).dot(&normal).abs() <= CAP_FLATNESS * radius);
+    let off_plane = |v: &u32| (vertices[*v as usize] - centre).dot(&normal).abs();
+    let tolerance = match rim {
+        Flatness::Plane => CAP_FLATNESS * radius,
+        Flatness::AsItsRim => {
+            let rim_off = lp.iter().map(off_plane).fold(0.0, f64::max);
+            (rim_off <= RIM_FLATNESS * radius).then_some(rim_off + CAP_FLATNESS * radius)?
+        }
+    };
+    let flat = tris.iter().flatten().all(|v| off_plane(v) <= tolerance);
     (flat && 4.0 * std::f64::consts::PI * area >= CAP_ROUNDNESS * perimeter * perimeter).then_some((centre, radius))
 }
 
@@ -305,4 +375,90 @@ pub fn choose_inlet(ends: &[VesselEnd], choice: InletChoice) -> usize {
         .filter(|&e| ends[e].kind != EndKind::Sac)
         .min_by(|&a, &b| key(&ends[a]).total_cmp(&key(&ends[b])).then(a.cmp(&b)))
         .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A tube of radius 1 along z from 0 to 4, 32 points round, its rim at z = 0 waved by
+    /// `wave` (a fraction of the radius) and closed by a cap of 8 rings strung from that rim to
+    /// its centre, its rim at z = 4 closed by a flat cap of the same kind.
+    fn tube_with_ring_caps(wave: f64) -> (Vec<Point3<f64>>, Vec<[u32; 3]>, usize) {
+        let (around, along, rings) = (32usize, 10usize, 8usize);
+        let angle = |i: usize| std::f64::consts::TAU * i as f64 / around as f64;
+        let mut vertices = vec![];
+        for j in 0..=along {
+            for i in 0..around {
+                let z = 4.0 * j as f64 / along as f64 + if j == 0 { wave * (3.0 * angle(i)).sin() } else { 0.0 };
+                vertices.push(Point3::new(angle(i).cos(), angle(i).sin(), z));
+            }
+        }
+        let at = |j: usize, i: usize| (j * around + i % around) as u32;
+        let mut triangles = vec![];
+        for j in 0..along {
+            for i in 0..around {
+                triangles.push([at(j, i), at(j, i + 1), at(j + 1, i + 1)]);
+                triangles.push([at(j, i), at(j + 1, i + 1), at(j + 1, i)]);
+            }
+        }
+        let mut cap = |rim_row: usize, outward: bool, triangles: &mut Vec<[u32; 3]>| {
+            let mut previous: Vec<u32> = (0..around).map(|i| at(rim_row, i)).collect();
+            for k in 1..=rings {
+                let scale = 1.0 - k as f64 / rings as f64;
+                let ring: Vec<u32> = if k == rings {
+                    vertices.push(Point3::new(0.0, 0.0, 4.0 * rim_row as f64 / along as f64));
+                    vec![(vertices.len() - 1) as u32; around]
+                } else {
+                    (0..around)
+                        .map(|i| {
+                            let rim = vertices[previous[i] as usize];
+                            let lift = rim.z - 4.0 * rim_row as f64 / along as f64;
+                            let z = rim.z - lift / (rings - k + 1) as f64;
+                            vertices.push(Point3::new(scale * angle(i).cos(), scale * angle(i).sin(), z));
+                            (vertices.len() - 1) as u32
+                        })
+                        .collect()
+                };
+                for i in 0..around {
+                    let (a, b, c, d) = (previous[i], previous[(i + 1) % around], ring[(i + 1) % around], ring[i]);
+                    let quad = if outward { [[a, c, b], [a, d, c]] } else { [[a, b, c], [a, c, d]] };
+                    triangles.extend(quad.into_iter().filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]));
+                }
+                previous = ring;
+            }
+        };
+        let wall = triangles.len();
+        cap(0, true, &mut triangles);
+        cap(along, false, &mut triangles);
+        let per_cap = (triangles.len() - wall) / 2;
+        (vertices, triangles, per_cap)
+    }
+
+    #[test]
+    fn a_cap_strung_across_a_rim_that_is_not_quite_planar_is_one_cap() {
+        // A rim 4 % of the radius off its plane: the cap's triangles next to it lean by about
+        // 15 degrees, far beyond a planar region's 2.
+        let (vertices, triangles, per_cap) = tube_with_ring_caps(0.04);
+        let caps = find_caps(&vertices, &triangles, None);
+        assert_eq!(caps.len(), 2, "{caps:?}");
+        for cap in &caps {
+            assert!(cap.sharp_rim);
+            assert_eq!(cap.triangles.len(), per_cap);
+            assert!((cap.end.radius - 1.0).abs() < 0.05, "radius {}", cap.end.radius);
+            assert!(cap.end.centre.x.abs() < 1e-9 && cap.end.centre.y.abs() < 1e-9);
+        }
+        let mut z: Vec<f64> = caps.iter().map(|c| c.end.centre.z).collect();
+        z.sort_by(f64::total_cmp);
+        assert!(z[0].abs() < 0.02 && (z[1] - 4.0).abs() < 1e-9, "{z:?}");
+    }
+
+    #[test]
+    fn a_cap_whose_rim_strays_far_from_a_plane_is_not_a_flat_cap() {
+        // A rim 30 % of the radius off its plane closes a vessel with a saddle, not a flat cap.
+        let (vertices, triangles, _) = tube_with_ring_caps(0.3);
+        let caps = find_caps(&vertices, &triangles, None);
+        assert_eq!(caps.len(), 1, "{caps:?}");
+        assert!((caps[0].end.centre.z - 4.0).abs() < 1e-9);
+    }
 }
