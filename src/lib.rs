@@ -17,6 +17,7 @@ pub mod end_planes;
 pub mod error;
 pub mod extensions;
 pub mod finishing;
+pub mod implicit_surface;
 pub mod input;
 pub mod junction;
 pub mod junction_finish;
