@@ -354,12 +354,17 @@ impl SampledGrid {
 
     /// `f` at every node of brick `key` that lies in the grid (NaN past its last node).
     pub fn sample_brick(&self, key: [usize; 3], f: &(impl ImplicitFunction + ?Sized)) -> Vec<f64> {
+        self.sample_brick_with(key, |p| f.value(p))
+    }
+
+    /// `value` at every node of brick `key` that lies in the grid (NaN past its last node).
+    pub fn sample_brick_with(&self, key: [usize; 3], value: impl Fn(&Point3<f64>) -> f64) -> Vec<f64> {
         let n = self.node_count();
         let mut out = vec![f64::NAN; BRICK_NODES];
-        for (local, value) in out.iter_mut().enumerate() {
+        for (local, v) in out.iter_mut().enumerate() {
             let node = brick_node(key, local);
             if node[0] < n[0] && node[1] < n[1] && node[2] < n[2] {
-                *value = f.value(&self.node_point(node[0], node[1], node[2]));
+                *v = value(&self.node_point(node[0], node[1], node[2]));
             }
         }
         out
@@ -378,6 +383,11 @@ impl SampledGrid {
         let half = 0.5 * (BRICK - 1) as f64;
         let c = key.map(|b| (b * BRICK) as f64 + half);
         (self.origin + Vector3::new(c[0], c[1], c[2]) * self.h, half * self.h * 3f64.sqrt())
+    }
+
+    /// The stored values of brick `key`, if any.
+    pub fn brick_values(&self, key: [usize; 3]) -> Option<&BrickValues> {
+        self.brick(key)
     }
 
     fn brick(&self, key: [usize; 3]) -> Option<&BrickValues> {
@@ -418,6 +428,126 @@ impl SampledGrid {
                                 out[(x + dx * BRICK) + M * ((y + dy * BRICK) + M * (z + dz * BRICK))] = v;
                             }
                         }
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Whether a cube's corner signs (bit c set: corner c inside) make more than one surface patch in
+/// it: its inside corners, or its outside ones, are not all joined by cube edges.
+const fn ambiguous_mask(mask: u8) -> bool {
+    let mut side = 0;
+    while side < 2 {
+        let set = if side == 0 { mask } else { !mask };
+        if set != 0 {
+            // Grow the component of the lowest corner of the set along cube edges.
+            let mut reached = set & set.wrapping_neg();
+            let mut grown = true;
+            while grown {
+                grown = false;
+                let mut c = 0;
+                while c < 8 {
+                    if reached & (1 << c) != 0 {
+                        let mut bit = 1;
+                        while bit < 8 {
+                            let d = c ^ bit;
+                            if set & (1 << d) != 0 && reached & (1 << d) == 0 {
+                                reached |= 1 << d;
+                                grown = true;
+                            }
+                            bit <<= 1;
+                        }
+                    }
+                    c += 1;
+                }
+            }
+            if reached != set {
+                return true;
+            }
+        }
+        side += 1;
+    }
+    false
+}
+
+/// [`ambiguous_mask`] for every mask.
+const AMBIGUOUS: [bool; 256] = {
+    let mut table = [false; 256];
+    let mut m = 0;
+    while m < 256 {
+        table[m] = ambiguous_mask(m as u8);
+        m += 1;
+    }
+    table
+};
+
+impl SampledGrid {
+    /// Removes every cell whose corner signs make more than one surface patch (a face with
+    /// diagonal signs, a crotch's wedge or a gap thinner than a cell, a surface almost in a plane
+    /// of nodes whose signs alternate), which naive surface nets would join into a non-manifold
+    /// edge or vertex: in each such cell the outside corner nearest zero (lowest node index on a
+    /// tie) goes inside, at a thousandth of a cell from zero, as a segmentation fills a gap
+    /// thinner than its voxels, until no cell is ambiguous (each pass fills at least one node, so
+    /// this ends). The vertices are projected onto `F = 0` afterwards anyway. Returns the nodes
+    /// filled; a grid without ambiguous cells is left exactly as it was.
+    pub fn resolve_ambiguities(&mut self) -> usize {
+        let mut filled = 0;
+        loop {
+            let sampled: Vec<usize> =
+                (0..self.keys.len()).filter(|&i| matches!(self.values[i], BrickValues::Nodes(_))).collect();
+            let mut flips: Vec<(u64, [usize; 3])> =
+                sampled.par_iter().flat_map_iter(|&i| self.ambiguous_fills(self.keys[i])).collect();
+            flips.sort_unstable_by_key(|f| f.0);
+            flips.dedup_by_key(|f| f.0);
+            if flips.is_empty() {
+                return filled;
+            }
+            filled += flips.len();
+            for (_, node) in flips {
+                let key = node.map(|x| x / BRICK);
+                let local = node[0] % BRICK + BRICK * (node[1] % BRICK + BRICK * (node[2] % BRICK));
+                if let Some(&b) = self.index.get(&key) {
+                    if let BrickValues::Nodes(values) = &mut self.values[b] {
+                        values[local] = -1e-3 * self.h;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The node each ambiguous cell of brick `key` asks to fill: (linear index, node).
+    fn ambiguous_fills(&self, key: [usize; 3]) -> Vec<(u64, [usize; 3])> {
+        const M: usize = BRICK + 1;
+        let values = self.with_halo(key);
+        let mut out = Vec::new();
+        for z in 0..BRICK {
+            for y in 0..BRICK {
+                for x in 0..BRICK {
+                    let node = [key[0] * BRICK + x, key[1] * BRICK + y, key[2] * BRICK + z];
+                    if node.iter().zip(&self.cells).any(|(a, c)| a >= c) {
+                        continue;
+                    }
+                    let corner_value = |c: usize| {
+                        let (dx, dy, dz) = corner_offset(c);
+                        values[(x + dx) + M * ((y + dy) + M * (z + dz))]
+                    };
+                    let mask = (0..8).fold(0u8, |m, c| if corner_value(c) < 0.0 { m | 1 << c } else { m });
+                    if !AMBIGUOUS[mask as usize] {
+                        continue;
+                    }
+                    let fill = (0..8)
+                        .filter(|&c| corner_value(c) >= 0.0)
+                        .map(|c| {
+                            let (dx, dy, dz) = corner_offset(c);
+                            let corner = [node[0] + dx, node[1] + dy, node[2] + dz];
+                            (corner_value(c), self.node_linear(corner), corner)
+                        })
+                        .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                    if let Some((_, linear, corner)) = fill {
+                        out.push((linear, corner));
                     }
                 }
             }
@@ -617,14 +747,16 @@ pub fn relax_on_surface(
         .collect()
 }
 
-/// Surface nets, projection onto `F = 0`, relaxation and the split into triangles: a closed
-/// triangulation of the surface in the grid (before any end is cut). `Err` where a vertex cannot
-/// be projected or the result is not manifold (two sheets through one cell: the grid is too
-/// coarse there).
+/// Ambiguous cells resolved ([`SampledGrid::resolve_ambiguities`]), surface nets, projection
+/// onto `F = 0`, relaxation and the split into triangles: a closed triangulation of the surface
+/// in the grid (before any end is cut), and the number of grid nodes flipped. `Err` where a
+/// vertex cannot be projected or the result is not manifold (two sheets through one cell that
+/// the flips could not separate: the grid is too coarse there).
 pub fn triangulate(
     f: &(impl ImplicitFunction + ?Sized),
-    grid: &SampledGrid,
-) -> Result<(Vec<Point3<f64>>, Vec<[u32; 3]>), SurfaceDefect> {
+    grid: &mut SampledGrid,
+) -> Result<(Vec<Point3<f64>>, Vec<[u32; 3]>, usize), SurfaceDefect> {
+    let flipped = grid.resolve_ambiguities();
     let (raw, quads) = surface_nets(grid)?;
     let projected: Vec<Option<Point3<f64>>> = raw.par_iter().map(|p| f.project(p)).collect();
     let mut vertices = Vec::with_capacity(raw.len());
@@ -645,7 +777,7 @@ pub fn triangulate(
             "two sheets of the surface pass through one grid cell (non-manifold edge)",
         ));
     }
-    Ok((vertices, triangles))
+    Ok((vertices, triangles, flipped))
 }
 
 /// Directed-edge map of a triangle list; `Err` with the first repeated directed edge (two
@@ -709,6 +841,8 @@ pub struct SurfaceStats {
     /// them; none in any fixture so far).
     pub snapped: usize,
     pub unsnapped: usize,
+    /// Grid nodes filled to remove ambiguous cells (none in the fixtures).
+    pub flipped: usize,
 }
 
 /// A triangulated lumen: f64 vertices on `F = 0` (or on a flat cap), triangles wound outward
@@ -729,6 +863,9 @@ pub struct EndCircle {
     pub radius: f64,
     /// Closed by a flat disc (else an open boundary loop).
     pub capped: bool,
+    /// How far past the plane the cut may touch the surface (the end's own tube and its tip;
+    /// infinite when nothing else lies beyond the end, as in the fixtures).
+    pub beyond: f64,
 }
 
 impl EndCircle {
@@ -749,8 +886,8 @@ impl EndCircle {
 pub const MIN_ANGLE_DEG: f64 = 5.0;
 
 /// Cuts the surface at the end plane of `o`, keeping the lumen side. Only vertices in the clip
-/// zone (near the tube's axis line, from 3 cells before the plane on) are considered, so the
-/// (infinite) plane never touches another tube. Vertices within a quarter cell of the plane are
+/// zone (near the tube's axis line, from 3 cells before the plane to `o.beyond` past it) are
+/// considered, so the (infinite) plane never touches another tube. Vertices within a quarter cell of the plane are
 /// slid along the axis onto it when that keeps their triangles well oriented and creates no
 /// triangle lying in the plane (else pushed a quarter cell away from it); the triangles crossing
 /// the plane are then split, new vertices landing on the end circle.
@@ -767,7 +904,7 @@ pub fn clip_open_end(
     let offset = |p: &Point3<f64>| {
         let w = p - o.centre;
         let a = w.dot(&n);
-        if a > -3.0 * h && (w - n * a).norm() < zone_radius {
+        if a > -3.0 * h && a < o.beyond && (w - n * a).norm() < zone_radius {
             a
         } else {
             f64::NEG_INFINITY
@@ -775,12 +912,20 @@ pub fn clip_open_end(
     };
     let mut s: Vec<f64> = vertices.iter().map(offset).collect();
     let mut on_plane = vec![false; vertices.len()];
-    let incident = incident_triangles(&triangles, vertices.len());
     let delta = 0.25 * h;
+    // The triangles of each vertex that may be slid (within a quarter cell of the plane).
+    let mut incident: HashMap<usize, Vec<u32>> = HashMap::new();
+    for (t, tri) in triangles.iter().enumerate() {
+        for &v in tri {
+            if s[v as usize].abs() < delta {
+                incident.entry(v as usize).or_default().push(t as u32);
+            }
+        }
+    }
     // Whether moving vertex v to q keeps its triangles facing out (not folded over) and, if
     // `onto_plane`, leaves none with all three corners on the plane.
     let acceptable = |v: usize, q: &Point3<f64>, onto_plane: bool, vertices: &[Point3<f64>], on_plane: &[bool]| {
-        incident[v].iter().all(|&t| {
+        incident[&v].iter().all(|&t| {
             let tri = triangles[t as usize];
             if onto_plane && tri.iter().all(|&x| x as usize == v || on_plane[x as usize]) {
                 return false;
@@ -905,33 +1050,41 @@ fn boundary_loops(edges: &HashMap<(u32, u32), u32>, vertices: &[Point3<f64>]) ->
     Ok(loops)
 }
 
-/// Closes the open end `o` (one boundary loop on its circle, see [`clip_open_end`]) with a flat
-/// disc: rings of vertices about a cell apart (the boundary loop's mean edge) from the circle
-/// inwards, each zipped to the next by the shorter diagonals, the last to the centre. The disc's
-/// triangles face along `o.outward`.
-pub fn cap_end(
-    o: &EndCircle,
+/// Closes each capped end of `ends` (one boundary loop on its circle, see [`clip_open_end`])
+/// with a flat disc: rings of vertices about a cell apart (the boundary loop's mean edge) from
+/// the circle inwards, each zipped to the next, the last fanned to the centre. The discs'
+/// triangles face along their ends' outward normals.
+pub fn cap_ends(
+    ends: &[EndCircle],
     vertices: &mut Vec<Point3<f64>>,
     triangles: &mut Vec<[u32; 3]>,
 ) -> Result<(), SurfaceDefect> {
     let edges = directed_edges(triangles)
         .map_err(|(a, _)| SurfaceDefect::new(vertices[a as usize], "non-manifold edge before capping"))?;
     let loops = boundary_loops(&edges, vertices)?;
-    let on_circle: Vec<&Vec<u32>> =
-        loops.iter().filter(|lp| lp.iter().all(|&v| o.holds(&vertices[v as usize], false))).collect();
-    let [boundary] = on_circle[..] else {
-        return Err(SurfaceDefect::new(
-            o.centre,
-            format!("the end has {} boundary loops to cap, not 1", on_circle.len()),
-        ));
-    };
+    for o in ends.iter().filter(|o| o.capped) {
+        let on_circle: Vec<&Vec<u32>> =
+            loops.iter().filter(|lp| lp.iter().all(|&v| o.holds(&vertices[v as usize], false))).collect();
+        let [boundary] = on_circle[..] else {
+            return Err(SurfaceDefect::new(
+                o.centre,
+                format!("the end has {} boundary loops to cap, not 1", on_circle.len()),
+            ));
+        };
+        cap_loop(o, boundary, vertices, triangles);
+    }
+    Ok(())
+}
+
+/// The disc of [`cap_ends`] over one boundary loop.
+fn cap_loop(o: &EndCircle, boundary: &[u32], vertices: &mut Vec<Point3<f64>>, triangles: &mut Vec<[u32; 3]>) {
     let (u, w) = plane_basis(&o.outward);
     let angle = |p: &Point3<f64>| {
         let d = p - o.centre;
         d.dot(&w).atan2(d.dot(&u))
     };
-    // The outer ring counter-clockwise about the outward normal (the cap's winding), unwrapped.
-    let mut outer: Vec<u32> = boundary.clone();
+    // The outer ring counter-clockwise about the outward normal (the cap's winding).
+    let mut outer: Vec<u32> = boundary.to_vec();
     let turn: f64 = (0..outer.len())
         .map(|k| {
             let a = angle(&vertices[outer[k] as usize]);
@@ -970,7 +1123,6 @@ pub fn cap_end(
     for k in 0..ring.len() {
         triangles.push([ring[k], ring[(k + 1) % ring.len()], centre]);
     }
-    Ok(())
 }
 
 /// Triangles between an outer and an inner ring, both counter-clockwise about the cap's normal
@@ -1279,7 +1431,7 @@ mod tests {
     fn a_narrow_band_gives_the_dense_grid_s_surface_exactly() {
         let h = 0.1;
         let (origin, cells) = sphere_grid(h);
-        let dense = SampledGrid::sample_all(origin, h, cells, &Sphere);
+        let mut dense = SampledGrid::sample_all(origin, h, cells, &Sphere);
         let all_keys = dense.keys.clone();
         // Bricks far from the surface held as one value.
         let band = SampledGrid::sample(origin, h, cells, all_keys, 1.0, |grid, key| {
@@ -1294,7 +1446,8 @@ mod tests {
         let a = surface_nets(&dense).unwrap();
         let b = surface_nets(&band).unwrap();
         assert!(a == b && !a.1.is_empty());
-        let (vertices, triangles) = triangulate(&Sphere, &dense).unwrap();
+        let (vertices, triangles, flipped) = triangulate(&Sphere, &mut dense).unwrap();
+        assert_eq!(flipped, 0);
         let mut s = TriangulatedSurface { vertices, triangles, stats: SurfaceStats::default() };
         check_surface(&Sphere, &mut s, &[]).unwrap();
         assert!(s.stats.max_vertex_offset < 1e-12 && s.stats.min_angle_deg > 5.0, "{:?}", s.stats);
@@ -1304,23 +1457,22 @@ mod tests {
     fn a_capped_cut_closes_the_surface_and_an_open_one_leaves_a_loop() {
         let h = 0.08;
         let (origin, cells) = sphere_grid(h);
-        let grid = SampledGrid::sample_all(origin, h, cells, &Sphere);
-        let (vertices, triangles) = triangulate(&Sphere, &grid).unwrap();
+        let mut grid = SampledGrid::sample_all(origin, h, cells, &Sphere);
+        let (vertices, triangles, _) = triangulate(&Sphere, &mut grid).unwrap();
         // The plane z = 0.1 + 0.5 cuts the sphere in a circle of radius sqrt(0.75).
         let end = EndCircle {
             centre: Point3::new(0.3, 0.2, 0.6),
             outward: Vector3::z(),
             radius: 0.75f64.sqrt(),
             capped: false,
+            beyond: f64::INFINITY,
         };
         for capped in [false, true] {
             let mut v = vertices.clone();
             let mut stats = SurfaceStats::default();
             let mut t = clip_open_end(&Sphere, &end, h, &mut v, triangles.clone(), &mut stats).unwrap();
             let end = EndCircle { capped, ..end };
-            if capped {
-                cap_end(&end, &mut v, &mut t).unwrap();
-            }
+            cap_ends(&[end], &mut v, &mut t).unwrap();
             let (v, t) = compact(v, t);
             let mut s = TriangulatedSurface { vertices: v, triangles: t, stats };
             check_surface(&Sphere, &mut s, &[end]).unwrap();

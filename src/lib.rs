@@ -38,6 +38,7 @@ pub mod surface;
 pub mod surface_smoothing;
 pub mod synthetic;
 pub mod synthetic_branching;
+pub mod synthetic_tree;
 pub mod testing;
 pub mod units;
 pub mod volume;

@@ -129,7 +129,7 @@ pub struct Opening {
 impl Opening {
     /// The end circle, open.
     pub fn circle(&self) -> EndCircle {
-        EndCircle { centre: self.centre, outward: self.outward, radius: self.radius, capped: false }
+        EndCircle { centre: self.centre, outward: self.outward, radius: self.radius, capped: false, beyond: f64::INFINITY }
     }
 }
 
@@ -768,8 +768,8 @@ impl BranchingFixture {
     pub fn generate_surface(&self) -> Result<BranchingSurface> {
         let f = self.lumen_function();
         let h = self.cell_size;
-        let grid = sample_grid(self, &f);
-        let (mut vertices, mut triangles) = triangulate(&f, &grid).map_err(|d| {
+        let mut grid = sample_grid(self, &f);
+        let (mut vertices, mut triangles, flipped) = triangulate(&f, &mut grid).map_err(|d| {
             let fix = if d.what.contains("non-manifold") {
                 "a smaller cell size or a wider blend"
             } else {
@@ -777,7 +777,7 @@ impl BranchingFixture {
             };
             self.geometry_error(&d.at, &d.what, fix)
         })?;
-        let mut stats = SurfaceStats { grid: grid.cells, ..SurfaceStats::default() };
+        let mut stats = SurfaceStats { grid: grid.cells, flipped, ..SurfaceStats::default() };
         let ends: Vec<EndCircle> = self.openings().iter().map(Opening::circle).collect();
         for o in &ends {
             triangles = clip_open_end(&f, o, h, &mut vertices, triangles, &mut stats)
