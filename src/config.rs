@@ -771,25 +771,35 @@ impl MeshConfig {
         Ok(())
     }
 
-    /// What a user should know about settings that were accepted: fractions normalised.
+    /// What a user should know about settings that were accepted: fractions normalised, no
+    /// format asked for.
     pub fn warnings(&self) -> Vec<crate::report::Warning> {
+        let mut out = vec![];
         let w = &self.wall;
         let fractions = [w.intima.fraction, w.media.fraction, w.adventitia.fraction];
         let total: f64 = fractions.iter().sum();
-        if (total - 1.0).abs() <= 1e-9 {
-            return vec![];
+        if (total - 1.0).abs() > 1e-9 {
+            let normalised: Vec<String> = fractions.iter().map(|f| format!("{:.3}", f / total)).collect();
+            out.push(crate::report::Warning::new(
+                "settings",
+                format!(
+                    "the wall layer fractions {}/{}/{} (intima/media/adventitia) sum to {total}; they were normalised \
+                     to {}",
+                    fractions[0],
+                    fractions[1],
+                    fractions[2],
+                    normalised.join("/")
+                ),
+            ));
         }
-        let normalised: Vec<String> = fractions.iter().map(|f| format!("{:.3}", f / total)).collect();
-        vec![crate::report::Warning::new(
-            "settings",
-            format!(
-                "the wall layer fractions {}/{}/{} (intima/media/adventitia) sum to {total}; they were normalised to {}",
-                fractions[0],
-                fractions[1],
-                fractions[2],
-                normalised.join("/")
-            ),
-        )]
+        if self.formats.is_empty() {
+            out.push(crate::report::Warning::new(
+                "settings",
+                "formats is empty (formats = []): no mesh is written, only report.json; name the formats wanted, e.g. \
+                 formats = [\"vtu\"] in the case file or --formats vtu",
+            ));
+        }
+        out
     }
 }
 

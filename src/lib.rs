@@ -6,13 +6,16 @@
 //! -> [`annotate`] ([`quality`], [`accuracy`]) -> [`writers`] and [`report`]; [`pipeline`] runs
 //! them in order. [`finishing`] adds, when asked, refinement before or after projection
 //! ([`refinement`]), walls from segmented surfaces ([`wall_surfaces`]) and flow extensions
-//! ([`extensions`]) to the annotated mesh.
+//! ([`extensions`]) to the annotated mesh. [`batch`] meshes many vessels, each in a process of
+//! its own, with a table of results.
 pub mod accuracy;
 pub mod annotate;
+pub mod batch;
 pub mod blocks;
 pub mod centerline;
 pub mod centerline_extract;
 pub mod config;
+pub mod end_names;
 pub mod end_planes;
 pub mod error;
 pub mod extensions;

@@ -31,6 +31,13 @@ enum Command {
     /// and the branching ones (STL + VTP centerlines); with --random-tree, random vessel trees
     /// with their truth instead.
     Fixtures(FixturesArgs),
+    /// Mesh every case of a manifest (CSV or JSON), N at a time, each in a process of its own,
+    /// with a summary table (summary.csv, summary.json).
+    #[command(long_about = vesselhex::batch::command::BATCH_HELP)]
+    Batch(vesselhex::batch::command::BatchArgs),
+    /// One case of `vesselhex batch`, handed over on standard input (run by the batch itself).
+    #[command(hide = true)]
+    BatchCase,
 }
 
 #[derive(Args)]
@@ -135,9 +142,17 @@ const MAX_THREADS: i64 = 256;
 
 #[derive(Args)]
 struct MeshArgs {
-    /// Lumen surface: STL (ASCII or binary), VTP or legacy VTK polydata.
+    /// Lumen surface: STL (ASCII or binary), VTP or legacy VTK polydata; or a folder of the wall
+    /// and its caps, one file each (SimVascular's mesh-surfaces/, snappyHexMesh's triSurface/):
+    /// the wall is walls_combined.*, else the files named wall*, else the largest; every other
+    /// file is a cap named after it.
     #[arg(long)]
     surface: PathBuf,
+    /// A cap in a file of its own, NAME=FILE (repeatable): it closes (or covers) one end of
+    /// --surface, which takes its name (the OpenFOAM patch, the FEBio surface, the Abaqus and
+    /// CalculiX sets, report.json's end). A cap named inlet is the inlet.
+    #[arg(long, value_name = "NAME=FILE", value_parser = parse_cap)]
+    cap: Vec<(String, PathBuf)>,
     /// Centerline: VMTK .vtp/.vtk with MaximumInscribedSphereRadius, or CSV with header x,y,z,r.
     #[arg(long)]
     centerlines: Option<PathBuf>,
@@ -182,8 +197,8 @@ struct MeshArgs {
     /// Worker threads, 1 to 256 (0 or none: all cores). The output does not depend on it.
     #[arg(long, value_parser = clap::value_parser!(u16).range(0..=MAX_THREADS))]
     threads: Option<u16>,
-    /// Without --centerlines: the inlet of the computed centerlines, auto (the largest end) or
-    /// x,y,z (the end nearest this point, in --units).
+    /// Without --centerlines: the inlet of the computed centerlines, auto (the cap named inlet,
+    /// else the largest end) or x,y,z (the end nearest this point, in --units).
     #[arg(long, default_value = "auto")]
     inlet: String,
     /// Without --centerlines: points x,y,z (in --units) near ends, overriding those found (every
@@ -228,6 +243,17 @@ struct CenterlinesArgs {
     quiet: bool,
 }
 
+/// Parses `--cap NAME=FILE`.
+fn parse_cap(text: &str) -> Result<(String, PathBuf), String> {
+    let (name, file) =
+        text.split_once('=').ok_or_else(|| format!("'{text}' is not NAME=FILE (e.g. inlet=inlet.stl)"))?;
+    vesselhex::input::check_end_name(name)?;
+    if file.is_empty() {
+        return Err(format!("'{text}' names no file after '='"));
+    }
+    Ok((name.to_string(), PathBuf::from(file)))
+}
+
 /// Parses "x,y,z" into a point, scaled to millimetres.
 fn parse_point(text: &str, scale: f64) -> vesselhex::Result<nalgebra::Point3<f64>> {
     let v: Vec<f64> = text.split(',').map(|t| t.trim().parse::<f64>()).collect::<Result<_, _>>().unwrap_or_default();
@@ -251,7 +277,7 @@ fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
         check_output_file("--branch-split", split, &[("--surface", &args.surface), ("--output", &args.output)])?;
     }
     let (surface, hygiene) = vesselhex::input::clean_surface(vesselhex::input::read_surface(&args.surface, units)?)?;
-    let extraction = extract_centerlines(&surface, &ExtractOptions { inlet, ends, sacs: vec![] })?;
+    let extraction = extract_centerlines(&surface, &ExtractOptions { inlet, ends, ..Default::default() })?;
     write_vtp(&extraction.centerlines, units.from_mm(), &args.output)?;
     let split_tree = match &args.branch_split {
         Some(path) => {
@@ -363,9 +389,11 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
         },
         ends: args.ends.iter().map(|e| parse_point(e, scale)).collect::<vesselhex::Result<Vec<_>>>()?,
         sacs: args.sacs.iter().map(|e| parse_point(e, scale)).collect::<vesselhex::Result<Vec<_>>>()?,
+        caps: vec![],
     };
     let request = MeshRequest {
         surface: args.surface,
+        caps: args.cap,
         centerlines: args.centerlines,
         extraction,
         centerline_units: args.centerline_units,
@@ -390,10 +418,9 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
     };
     if !args.quiet {
         eprintln!(
-            "vesselhex: {ends}{} lumen + {} wall hexes; scaled Jacobian min {:.3} (wall mean {:.3}); lumen skew mean \
-             {:.3}; surface nodes within {:.2e} um; written to {}",
-            report.lumen.elements,
-            report.wall.all.elements,
+            "vesselhex: {ends}{}; scaled Jacobian min {:.3} (wall mean {:.3}); lumen skew mean {:.3}; surface nodes \
+             within {:.2e} um; written to {}",
+            hex_counts(&report),
             report.lumen.scaled_jacobian.min.min(report.wall.all.scaled_jacobian.min),
             report.wall.all.scaled_jacobian.mean,
             report.lumen.equiangle_skew.mean,
@@ -402,6 +429,18 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
         );
     }
     Ok(if ends.is_empty() { MeshOutcome::Complete } else { MeshOutcome::EndsNotMeshed })
+}
+
+/// The hexes of the summary line by part, adding up to the mesh's: lumen, wall, and the flow
+/// extensions' when there are any.
+fn hex_counts(report: &vesselhex::report::Report) -> String {
+    let extension: usize = report.additions.extensions.iter().flatten().map(|e| e.elements).sum();
+    let (lumen, wall) = (report.lumen.elements, report.wall.all.elements);
+    if extension == 0 {
+        format!("{lumen} lumen + {wall} wall hexes")
+    } else {
+        format!("{lumen} lumen + {wall} wall + {extension} extension hexes")
+    }
 }
 
 /// Exit codes (docs/guide/command-line.md): 0 success, 1 error, 2 usage error (clap's), 3 written but some
@@ -422,6 +461,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Mesh(args) => mesh(args),
         Command::Centerlines(args) => centerlines(args).map(|_| MeshOutcome::Complete),
+        Command::Batch(args) => return vesselhex::batch::command::run_command(args),
+        Command::BatchCase => return vesselhex::batch::command::run_child(),
         Command::Fixtures(args) => fixtures(args).map(|_| MeshOutcome::Complete),
     };
     if let Some(signal) = vesselhex::output::interrupted_by() {

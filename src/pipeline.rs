@@ -6,18 +6,19 @@ use crate::annotate::annotate;
 use crate::blocks::{graded_levels, growth_ratio_for_first_cell, SectionTemplate};
 use crate::centerline::{Branch, CenterlineSample};
 use crate::centerline::{CenterlineTree, ForcedMerge};
+use crate::centerline_extract::names_of_ends;
 use crate::centerline_extract::{EndKind, VesselEnd};
 use crate::config::{MeshConfig, WallGrowth};
+use crate::end_names::{mesh_ends_at, name_mesh_ends};
 use crate::end_planes::EndCaps;
 use crate::error::{Error, Result};
 use crate::input::{
-    clean_surface, read_centerlines_within, read_surface_within, Centerlines, HygieneReport, ReadLimits,
-    TriangleSurface,
+    clean_surface, read_centerlines_within, read_surface_parts, read_surface_within, surface_files, Centerlines,
+    HygieneReport, NamedCap, ReadLimits, TriangleSurface,
 };
 use crate::junction::{
-    allowed_turns, analyse_junctions, branch_core_dims, check_junction_spacing, equal_cells, find_junction_overlap,
-    fold_normal, keep_fold_cores_inside, signed_angle, twist_frames, unanalysable_close_junction, FoldEnd,
-    JunctionGeometry,
+    allowed_turns, analyse_junctions, check_junction_spacing, find_junction_overlap, keep_fold_cores_inside,
+    signed_angle, twist_frames, unanalysable_close_junction, FoldEnd, JunctionGeometry, LayoutPolicy,
 };
 use crate::junction_finish::{finish_junctions, FinishQuality};
 use crate::mesh::VesselMesh;
@@ -105,7 +106,7 @@ fn plan_branches<'a>(
             let end = end.map(|(j, slot, l)| (j, slot, l.expect("only a branch between two junctions is a bridge")));
             let turn_needed = |s: f64, j: usize, q: u8| {
                 let f = branch.at(s).frame;
-                let want = fold_normal(&junctions[j].axis, &f.tangent, q);
+                let want = junctions[j].fold_normal(junctions[j].slot_of(b), &f.tangent, q);
                 signed_angle(&f.normal, &want, &f.tangent)
             };
             let s0 = start.map_or(0.0, |(_, _, l)| l);
@@ -146,8 +147,8 @@ fn plan_branches<'a>(
             Ok(BranchPlan {
                 branch,
                 caps,
-                start: start.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, 0, setup.template), l)),
-                end: end.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, q_end, setup.template), l)),
+                start: start.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, 0), l)),
+                end: end.map(|(j, slot, l)| (j, FoldEnd::at(&junctions[j], slot, q_end), l)),
             })
         })
         .collect()
@@ -383,20 +384,58 @@ pub fn mesh_vessel(
     progress.stage("surface index");
     let lumen_surface = LumenSurface::new(surface)?;
     check_centerline_file(&lumen_surface, centerlines)?;
+    // Books first: a straight spine shared by every branch is the best-shaped fold where it
+    // orders the branches. A vessel refused so, or short of a bar, with a junction of four or
+    // more branches is meshed again with that junction in sectors, and the better mesh kept
+    // (the first of equals; judged as a junction's finishes are).
+    let books = LayoutPolicy::books_only();
+    let meshed = mesh_vessel_laid_out(surface, &lumen_surface, centerlines, config, &books, progress);
+    let within_bars = |m: &Meshed| FinishQuality::of_mesh(&m.mesh).meets_bars();
+    if meshed.as_ref().is_ok_and(within_bars) || !books.sectors_differ.get() {
+        return meshed;
+    }
+    let sectors = LayoutPolicy::with_sectors();
+    let laid_out = mesh_vessel_laid_out(surface, &lumen_surface, centerlines, config, &sectors, progress);
+    match (meshed, laid_out) {
+        (Ok(a), Ok(b)) => {
+            Ok(if FinishQuality::of_mesh(&b.mesh).better_than(&FinishQuality::of_mesh(&a.mesh)) { b } else { a })
+        }
+        (Ok(a), Err(_)) => Ok(a),
+        (Err(_), Ok(b)) => Ok(b),
+        (Err(_), Err(e)) => Err(e),
+    }
+}
+
+/// [`mesh_vessel`] with the junctions' arrangements `policy` allows.
+fn mesh_vessel_laid_out(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    policy: &LayoutPolicy,
+    progress: &mut Progress,
+) -> Result<Meshed> {
     progress.stage("centerline");
-    let tree = CenterlineTree::build(centerlines, &config.centerline, Some(&lumen_surface))?;
-    let overlap = match analyse_junctions(&tree, &lumen_surface) {
-        Ok(junctions) => find_junction_overlap(&tree, &junctions, &lumen_surface),
-        Err(e) => Some(unanalysable_close_junction(&tree, &lumen_surface).ok_or(e)?),
+    let tree = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))?;
+    // A junction no book orders and another within two of its radii are one junction in fact:
+    // merged (with sectors allowed too, where the merged junction may be laid out in them).
+    let overlap = match analyse_junctions(&tree, lumen_surface, policy) {
+        Ok(junctions) => policy
+            .sectors
+            .then(|| unanalysable_close_junction(&tree, lumen_surface))
+            .flatten()
+            .or_else(|| find_junction_overlap(&tree, &junctions, lumen_surface)),
+        Err(e) => Some(unanalysable_close_junction(&tree, lumen_surface).ok_or(e)?),
     };
     let coarser = coarser_junctions(config, centerlines);
     let Some(overlap) = overlap else {
         let close_merges = tree.close_merges.clone();
-        let meshed = mesh_tree_recentred(surface, &lumen_surface, tree, centerlines, config, &close_merges, progress);
+        let meshed =
+            mesh_tree_recentred(surface, lumen_surface, tree, centerlines, config, &close_merges, policy, progress);
         let (Err(Error::Geometry(refusal)), Some(coarser)) = (&meshed, coarser) else { return meshed };
-        let tree = CenterlineTree::build(centerlines, &config.centerline, Some(&lumen_surface))?;
+        let tree = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))?;
         let mut retried =
-            mesh_tree_recentred(surface, &lumen_surface, tree, centerlines, &coarser, &close_merges, progress)
+            mesh_tree_recentred(surface, lumen_surface, tree, centerlines, &coarser, &close_merges, policy, progress)
                 .map_err(|_| Error::Geometry(refusal.clone()))?;
         retried.notes.push(junction_spacing_note(
             config,
@@ -414,8 +453,8 @@ pub fn mesh_vessel(
     let mut best: Option<(Meshed, FinishQuality)> = None;
     let mut first_error = None;
     for at in MERGED_CENTRE_AT {
-        let attempt = merged_tree(centerlines, merged_config, &lumen_surface, segment, at).and_then(|tree| {
-            mesh_tree(surface, &lumen_surface, tree, &centerlines.source, merged_config, false, progress)
+        let attempt = merged_tree(centerlines, merged_config, lumen_surface, segment, at, policy).and_then(|tree| {
+            mesh_tree(surface, lumen_surface, tree, &centerlines.source, merged_config, false, policy, progress)
         });
         match attempt {
             Ok(meshed) => {
@@ -511,13 +550,14 @@ fn mesh_tree_recentred(
     centerlines: &Centerlines,
     config: &MeshConfig,
     close_merges: &[usize],
+    policy: &LayoutPolicy,
     progress: &mut Progress,
 ) -> Result<Meshed> {
-    let meshed = mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, true, progress);
+    let meshed = mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, true, policy, progress);
     if close_merges.is_empty() || meshed.as_ref().is_ok_and(|m| FinishQuality::of_mesh(&m.mesh).meets_bars()) {
         return meshed;
     }
-    recentre_close_merges(surface, lumen_surface, centerlines, config, meshed, close_merges, progress)
+    recentre_close_merges(surface, lumen_surface, centerlines, config, meshed, close_merges, policy, progress)
 }
 
 /// Which branches end blind in a saccular aneurysm's sac (see [`ends_in_sac`]), each renamed
@@ -550,6 +590,7 @@ fn recentre_close_merges(
     config: &MeshConfig,
     meshed: Result<Meshed>,
     close_merges: &[usize],
+    policy: &LayoutPolicy,
     progress: &mut Progress,
 ) -> Result<Meshed> {
     let mut best = meshed.as_ref().ok().map(|m| FinishQuality::of_mesh(&m.mesh));
@@ -557,7 +598,9 @@ fn recentre_close_merges(
     for at in MERGED_CENTRE_AT {
         let forced: Vec<ForcedMerge> = close_merges.iter().map(|&segment| ForcedMerge { segment, at }).collect();
         let attempt = CenterlineTree::build_merging(centerlines, &config.centerline, Some(lumen_surface), &forced)
-            .and_then(|tree| mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, false, progress));
+            .and_then(|tree| {
+                mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, false, policy, progress)
+            });
         let Ok(meshed) = attempt else { continue };
         let quality = FinishQuality::of_mesh(&meshed.mesh);
         if best.as_ref().is_none_or(|b| quality.better_than(b)) {
@@ -589,11 +632,12 @@ fn merged_tree(
     surface: &LumenSurface,
     segment: usize,
     at: f64,
+    policy: &LayoutPolicy,
 ) -> Result<CenterlineTree> {
     let mut forced = vec![ForcedMerge { segment, at }];
     loop {
         let tree = CenterlineTree::build_merging(centerlines, &config.centerline, Some(surface), &forced)?;
-        let junctions = analyse_junctions(&tree, surface)?;
+        let junctions = analyse_junctions(&tree, surface, policy)?;
         let Some(overlap) = find_junction_overlap(&tree, &junctions, surface) else { return Ok(tree) };
         let next = tree.segments[overlap.branch];
         if forced.len() >= MAX_FORCED_MERGES || forced.iter().any(|f| f.segment == next) {
@@ -621,9 +665,10 @@ fn project_tree(
     config: &MeshConfig,
     normals_outward: bool,
     steep_short_branches: bool,
+    policy: &LayoutPolicy,
 ) -> Result<ProjectedTree> {
     let l = &config.lumen;
-    let mut junctions = analyse_junctions(tree, lumen_surface)?;
+    let mut junctions = analyse_junctions(tree, lumen_surface, policy)?;
     check_junction_spacing(tree, &junctions, lumen_surface)?;
     if !junctions.is_empty() && !l.core_elements.is_multiple_of(2) {
         return Err(Error::Config(format!(
@@ -633,13 +678,10 @@ fn project_tree(
             l.core_elements + 1
         )));
     }
-    // Every junction's pages get half the core's cells, so every branch keeps the square O-grid
-    // of the settings (thin pages, BRANCHING.md §4.3, are to give small side branches fewer).
-    equal_cells(&mut junctions, l.core_elements);
+    // Every fold splits the square O-grid of the settings along its middle row and column.
     keep_fold_cores_inside(&mut junctions, l.core_size, lumen_surface);
-    let templates: Vec<SectionTemplate> = branch_core_dims(tree, &junctions, l.core_elements, lumen_surface)?
-        .into_iter()
-        .map(|(nx, ny)| SectionTemplate::rect(nx, ny, l.core_size, l.ray_reach))
+    let templates: Vec<SectionTemplate> = (0..tree.branches.len())
+        .map(|_| SectionTemplate::rect(l.core_elements, l.core_elements, l.core_size, l.ray_reach))
         .collect();
     let sacs = name_sacs(tree, &config.centerline.sacs_mm);
     let spacing = |s: &crate::centerline::CenterlineSample| l.axial_spacing_mm.unwrap_or(l.axial_spacing * s.radius);
@@ -680,6 +722,7 @@ pub fn mesh_tree(
     centerline_source: &Path,
     config: &MeshConfig,
     steep_short_branches: bool,
+    policy: &LayoutPolicy,
     progress: &mut Progress,
 ) -> Result<Meshed> {
     check_units(lumen_surface, &tree, centerline_source)?;
@@ -687,7 +730,7 @@ pub fn mesh_tree(
 
     progress.stage("projection");
     let ProjectedTree { junctions, templates, plans, projected } =
-        project_tree(&mut tree, lumen_surface, config, normals_outward, steep_short_branches)?;
+        project_tree(&mut tree, lumen_surface, config, normals_outward, steep_short_branches, policy)?;
 
     progress.stage("volume");
     let l = &config.lumen;
@@ -775,7 +818,10 @@ fn refuse_inverted(
 /// Everything `vesselhex mesh` was asked.
 #[derive(Debug, Clone)]
 pub struct MeshRequest {
+    /// The surface: a file, or a folder of the wall and its caps (see [`crate::input::surface_files`]).
     pub surface: PathBuf,
+    /// Caps in files of their own (`--cap NAME=FILE`), each naming its end.
+    pub caps: Vec<(String, PathBuf)>,
     pub centerlines: Option<PathBuf>,
     /// Unit of the centerline file when it differs from the surface's.
     pub centerline_units: Option<crate::units::LengthUnit>,
@@ -830,8 +876,10 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let inputs: Vec<&Path> = [Some(&request.surface), request.centerlines.as_ref(), request.case_file.as_ref()]
         .into_iter()
         .flatten()
+        .chain(request.caps.iter().map(|(_, file)| file))
         .map(PathBuf::as_path)
         .collect();
+    let files = surface_files(&request.surface, &request.caps)?;
     crate::finishing::check_wall_surfaces(config)?;
     let output = claim_output(&request.output, &inputs, config, request.force)?;
     let limits = ReadLimits::within(request.max_memory);
@@ -839,7 +887,12 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
     let stages = 10 + u64::from(request.centerlines.is_none()) + crate::finishing::stages(config);
     let mut progress = Progress::new(request.quiet, stages);
     progress.stage("reading");
-    let (surface, _) = read_surface_within(&request.surface, config.units, &limits)?;
+    let (surface, caps) = if files.caps.is_empty() && files.walls.len() == 1 {
+        (read_surface_within(&files.walls[0], config.units, &limits)?.0, vec![])
+    } else {
+        let (surface, _, caps) = read_surface_parts(&files, config.units, &limits)?;
+        (surface, caps)
+    };
     let centerline_units = request.centerline_units.unwrap_or(config.units);
     let centerlines = match &request.centerlines {
         Some(path) => CenterlineSource::Given(read_centerlines_within(path, centerline_units, &limits)?),
@@ -850,6 +903,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
         centerline_units: request.centerline_units,
         max_memory: request.max_memory,
         warnings: request.warnings.clone(),
+        caps,
     };
     let vessel = mesh_surface(surface, centerlines, settings, &mut progress)?;
     write_vessel(&vessel, config, output, request.reproducible, &mut progress)
@@ -965,6 +1019,7 @@ fn end_reports(
     ends.iter()
         .enumerate()
         .map(|(k, e)| EndReport {
+            name: None,
             position: (e.centre.coords * scale).into(),
             radius: e.radius * scale,
             kind: e.kind.name(),
@@ -1106,7 +1161,8 @@ fn build_report(
                 centre: (g.centre.coords * scale).into(),
                 radius: g.radius * scale,
                 branches: g.slots.iter().map(|s| meshed.tree.branches[s.branch].name.clone()).collect(),
-                spine_axis: g.axis.into(),
+                arrangement: g.arrangement_name(),
+                spine_axis: g.spine_axis().map(Into::into),
                 wall_growth: match config.wall.growth {
                     WallGrowth::Ray => JunctionWall::Ray,
                     WallGrowth::Normal => meshed.junction_variant.wall,
@@ -1198,6 +1254,9 @@ pub struct MeshSettings {
     pub max_memory: u64,
     /// Warnings found before the run, reported with the rest.
     pub warnings: Vec<Warning>,
+    /// Caps given in files of their own (see [`crate::input::read_surface_parts`]): each names
+    /// the end it closes or covers.
+    pub caps: Vec<NamedCap>,
 }
 
 /// A vessel meshed and not yet written: the mesh and what its report needs. What `run` writes,
@@ -1213,6 +1272,8 @@ pub struct MeshedVessel {
     /// the inlet.
     pub ends: Vec<VesselEnd>,
     pub inlet: usize,
+    /// The name each end was given by a cap (parallel to `ends`).
+    pub end_names: Vec<Option<String>>,
     /// What surface hygiene changed.
     pub hygiene: HygieneReport,
     /// Refinement, segmented walls and flow extensions done after meshing (millimetres).
@@ -1239,15 +1300,20 @@ pub fn mesh_surface(
     progress.stage("surface hygiene");
     let (surface, hygiene) = clean_surface(surface)?;
     settings.warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
+    let mut found_names = vec![];
     let (centerlines, centerline_source, found_ends) = match centerlines {
         CenterlineSource::Given(centerlines) => {
             let source = centerlines.source.clone();
             (centerlines, source, None)
         }
-        CenterlineSource::Extract(options) => {
+        CenterlineSource::Extract(mut options) => {
             progress.stage("centerline extraction");
+            if options.caps.is_empty() {
+                options.caps = settings.caps.clone();
+            }
             let extraction = crate::centerline_extract::extract_centerlines(&surface, &options)?;
             settings.warnings.extend(extraction.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
+            found_names = extraction.end_names;
             let ends = Some((extraction.ends, extraction.inlet));
             (extraction.centerlines, PathBuf::from("(computed from the surface)"), ends)
         }
@@ -1294,10 +1360,20 @@ pub fn mesh_surface(
         Err(e) => return Err(name_winding(e, &surface)),
     };
     settings.warnings.append(&mut meshed.notes);
+    // The ends named by caps: found on the surface, or the given centerlines' ends.
+    let (ends, inlet) = found_ends.clone().unwrap_or_else(|| tree_ends(&meshed.tree));
+    if found_ends.is_none() {
+        found_names = names_of_ends(&ends, &settings.caps).map_err(|e| Error::input(&surface.source, e))?;
+    }
+    name_mesh_ends(&mut meshed.mesh, &ends, &found_names);
     let openings = side_openings(&surface, found_ends.as_ref().map_or(&[][..], |(e, _)| e), &short_branches);
     let limits = ReadLimits::within(settings.max_memory);
     let asked: Vec<SideOpening> = openings.iter().flatten().copied().collect();
-    let additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress, &asked)?;
+    let mut additions = crate::finishing::finish(&mut meshed, &surface, config, &limits, progress, &asked)?;
+    // An end opened in the side of the mesh is named as the others.
+    for (old, new) in name_mesh_ends(&mut meshed.mesh, &ends, &found_names) {
+        additions.side_ends.iter_mut().filter(|s| s.end == old).for_each(|s| s.end = new.clone());
+    }
     let mut left_out_mm = vec![];
     for ((end_mm, message), opening) in short_branches.into_iter().zip(&openings) {
         let [x, y, z] = end_mm;
@@ -1324,7 +1400,7 @@ pub fn mesh_surface(
             }
         });
     }
-    let (ends, inlet) = found_ends.unwrap_or_else(|| tree_ends(&meshed.tree));
+    found_names.resize(ends.len(), None);
     Ok(MeshedVessel {
         meshed,
         surface,
@@ -1332,6 +1408,7 @@ pub fn mesh_surface(
         centerlines,
         ends,
         inlet,
+        end_names: found_names,
         hygiene,
         additions,
         settings,
@@ -1439,7 +1516,12 @@ pub fn write_vessel(
 pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(String, f64)]) -> Report {
     let mut warnings = vessel.settings.warnings.clone();
     let side_ends: Vec<[f64; 3]> = vessel.additions.side_ends.iter().map(|s| s.centre).collect();
-    let ends = end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, &side_ends, config.output_units.from_mm());
+    let mut ends =
+        end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, &side_ends, config.output_units.from_mm());
+    let mesh = &vessel.meshed.mesh;
+    for ((report, at), given) in ends.iter_mut().zip(mesh_ends_at(mesh, &vessel.ends)).zip(&vessel.end_names) {
+        report.name = at.map(|m| mesh.ends[m].name.clone()).or_else(|| given.clone());
+    }
     let left_out = ends_left_out(&vessel.ends, &vessel.left_out_mm);
     warnings.extend(ends_not_meshed(&ends, &left_out, config.output_units));
     warnings.extend(ends_cut_short(&vessel.meshed, config));
@@ -1491,3 +1573,4 @@ mod tests {
         assert!(!warnings[0].message.contains("--ends"), "{}", warnings[0].message);
     }
 }
+

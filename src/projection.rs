@@ -97,6 +97,8 @@ pub struct JunctionEnd<'a> {
 #[derive(Debug, Clone, Default)]
 struct Probe {
     misses: usize,
+    /// The rays that met no wall.
+    missed: Vec<usize>,
     /// Hits on a triangle seen from outside the lumen.
     from_outside: usize,
     /// Largest |normal . tangent| over the hit triangles.
@@ -149,6 +151,7 @@ fn cast_rays(
             }
             None => {
                 probe.misses += 1;
+                probe.missed.push(k);
                 section.surface.push(origin + dir * len);
             }
         }
@@ -169,6 +172,112 @@ fn cast_section(
     let targets: Vec<Point3<f64>> =
         template.target_dir.iter().map(|d| template.place(station, &(d * template.ray_reach))).collect();
     cast_rays(template, surface, station, core, &targets, orientation)
+}
+
+/// Rays cast from a section's centre over its plane to find its wall (per template target
+/// direction), and the candidates searched for a centre inside the lumen.
+const RECENTRE_RINGS: usize = 4;
+const RECENTRE_SPOKES: usize = 12;
+
+/// Whether a point lies inside the lumen: the first wall met along a few directions is seen
+/// from inside (a consistently wound surface's first hit from inside faces away).
+fn inside_lumen(surface: &LumenSurface, p: &Point3<f64>, orientation: f64, reach: f64) -> bool {
+    [Vector3::x(), Vector3::y(), Vector3::z(), -Vector3::x()].iter().all(|d| {
+        surface
+            .first_hit(p, d, reach)
+            .is_some_and(|h| surface.normals[h.triangle as usize].dot(d) * orientation > 0.0)
+    })
+}
+
+/// A section cast from the lumen itself rather than from the centerline's point: where the
+/// ordinary section's rays do not all meet the wall from inside (a tight or eccentric stenosis,
+/// a kink, a lumen whose smoothed centerline runs near one side), the section's centre moves,
+/// within its plane, to the point of it furthest inside the lumen near the centerline, the rays
+/// from there find the section's wall (a closed loop around an inside point: every ray meets
+/// it from inside), and the core shrinks until its boundary lies within [`CORE_REACH`] of that
+/// wall. The plane and the frame are the station's, so the section stays one of the branch's.
+fn recentred_section(
+    template: &SectionTemplate,
+    surface: &LumenSurface,
+    station: &CenterlineSample,
+    orientation: f64,
+) -> (Probe, ProjectedSection) {
+    let f = &station.frame;
+    let r = station.radius;
+    let reach = RAY_SLACK * template.ray_reach * r * 2.0;
+    let depth = |p: &Point3<f64>| -> Option<f64> {
+        inside_lumen(surface, p, orientation, reach).then(|| surface.closest(p).distance)
+    };
+    // The deepest of a polar grid of candidates within the section's radius.
+    let mut best: Option<(f64, Point3<f64>)> = depth(&station.point).map(|d| (d, station.point));
+    for ring in 1..=RECENTRE_RINGS {
+        for k in 0..RECENTRE_SPOKES {
+            let phi = std::f64::consts::TAU * k as f64 / RECENTRE_SPOKES as f64;
+            let rho = r * ring as f64 / RECENTRE_RINGS as f64;
+            let p = station.point + (f.normal * phi.cos() + f.binormal * phi.sin()) * rho;
+            if let Some(d) = depth(&p) {
+                if best.is_none_or(|(b, _)| d > b) {
+                    best = Some((d, p));
+                }
+            }
+        }
+    }
+    let Some((_, centre)) = best else {
+        return cast_section(template, surface, station, orientation);
+    };
+    let moved = CenterlineSample { point: centre, ..*station };
+    // The wall along each ray direction, from the centre.
+    let wall: Vec<Option<f64>> = template
+        .target_dir
+        .iter()
+        .map(|d| {
+            let dir = f.normal * d.x + f.binormal * d.y;
+            surface.first_hit(&centre, &dir, reach).map(|h| h.distance)
+        })
+        .collect();
+    if wall.iter().any(Option::is_none) {
+        return cast_section(template, surface, &moved, orientation);
+    }
+    // The core shrunk about the centre until each ring node lies within CORE_REACH of the way
+    // to the wall in its direction.
+    let mut shrink: f64 = 1.0;
+    for (k, w) in wall.iter().enumerate() {
+        let c = template.core[template.ring_core_index[k]];
+        let along = c.norm() * r;
+        if along > 0.0 {
+            let dir = template.target_dir[k];
+            let cos = (c.dot(&dir) / c.norm()).max(0.1);
+            shrink = shrink.min(CORE_REACH * w.expect("checked") * cos / along);
+        }
+    }
+    let core: Vec<Point3<f64>> = template.core.iter().map(|c| template.place(&moved, &(c * shrink))).collect();
+    let targets: Vec<Point3<f64>> = template
+        .target_dir
+        .iter()
+        .zip(&wall)
+        .map(|(d, w)| centre + (f.normal * d.x + f.binormal * d.y) * (w.expect("checked") / RAY_SLACK * 0.999))
+        .collect();
+    cast_rays(template, surface, &moved, core, &targets, orientation)
+}
+
+/// An ordinary section: cast from the centerline, or recentred in the lumen where that does not
+/// close (see [`recentred_section`]).
+fn ordinary_section(
+    template: &SectionTemplate,
+    surface: &LumenSurface,
+    station: &CenterlineSample,
+    orientation: f64,
+) -> (Probe, ProjectedSection) {
+    let cast = cast_section(template, surface, station, orientation);
+    if cast.0.valid() {
+        return cast;
+    }
+    let recentred = recentred_section(template, surface, station, orientation);
+    if recentred.0.valid() {
+        recentred
+    } else {
+        cast
+    }
 }
 
 /// Everything `project_branch` needs besides the branch.
@@ -294,6 +403,25 @@ pub fn project_branch(
             )));
         }
     };
+    // A section that closes neither from the centerline nor from inside the lumen, in the half
+    // of the branch towards a vessel end, lies in a plane that crosses the end's opening (the
+    // vessel bends just before it): the mesh stops short of it on that side, at the next clean
+    // section (an end cut well short is said by its warning).
+    let closes = |i: usize, p: &Probe| p.valid() || recentred_section(template, surface, &samples[i], orient).0.valid();
+    let (mut i0, mut i1) = (i0, i1);
+    let half = 0.5 * length;
+    if start_junction.is_none() {
+        let bad = probes.iter().rev().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s < half && !closes(*i, p));
+        if let Some(next) = bad.and_then(|&(b, _)| probes.iter().find(|(i, _)| *i > b && clean[*i]).map(|c| c.0)) {
+            i0 = next.min(i1);
+        }
+    }
+    if end_junction.is_none() {
+        let bad = probes.iter().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s >= half && !closes(*i, p));
+        if let Some(prev) = bad.and_then(|&(b, _)| probes.iter().rev().find(|(i, _)| *i < b && clean[*i]).map(|c| c.0)) {
+            i1 = prev.max(i0);
+        }
+    }
     // A closed end keeps a margin from its cap, unless the sections were turned into the cap's
     // plane (they run parallel to it, clear of it).
     let r0 = samples[i0].radius;
@@ -306,8 +434,10 @@ pub fn project_branch(
         Some(_) => hi,
         None => samples[i1].s - r1 * (trim_outlet + if dome_end { CLOSED_END_MARGIN } else { 0.0 }),
     };
+    // Between the ends, a section that does not close from the centerline may from inside the
+    // lumen (see `recentred_section`).
     if let Some((bad, p)) = probes.iter().find(|(i, p)| {
-        samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !p.valid()
+        samples[*i].s >= samples[i0].s.min(s_start) && samples[*i].s <= samples[i1].s.max(s_end) && !closes(*i, p)
     }) {
         return Err(Error::Geometry(format!(
             "{}: the cross-section of branch {name} {} does not close: {} of {} rays miss the lumen surface and {} \
@@ -347,7 +477,7 @@ pub fn project_branch(
     let positions =
         if stub { vec![s_start] } else { crate::blocks::station_positions(s_start, s_end, |s| spacing(&branch.at(s))) };
     let sections: Vec<(Probe, ProjectedSection)> =
-        positions.par_iter().map(|&s| cast_section(template, surface, &branch.at(s), orient)).collect();
+        positions.par_iter().map(|&s| ordinary_section(template, surface, &branch.at(s), orient)).collect();
     let mut ordinary = Vec::with_capacity(sections.len());
     for (probe, section) in sections {
         if !probe.valid() {
@@ -483,13 +613,7 @@ pub fn clear_transition_length(
     // The folded end lies on the slot's two pages and the spine: where those meet the wall (the
     // crotches and the spine's ends) must lie ahead of the last ordinary section, or the
     // transition would run backwards there and fold over itself.
-    let (page_a, page_b) = geometry.side_pages(slot);
-    let fold_wall = [
-        geometry.centre + geometry.pages[page_a].dir * geometry.pages[page_a].depth,
-        geometry.centre + geometry.pages[page_b].dir * geometry.pages[page_b].depth,
-        geometry.centre + geometry.axis * geometry.spine_up,
-        geometry.centre - geometry.axis * geometry.spine_down,
-    ];
+    let fold_wall = geometry.fold_wall(slot);
     let fold_ahead = |d: f64| {
         let st = at(d);
         let towards = if at_start { -st.frame.tangent } else { st.frame.tangent };
@@ -718,16 +842,47 @@ fn cast_fold(
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     let fold_points = points.pop().expect("at least two transition sections");
     let at_fold = transition_sample(j, station, sense, 1.0, j.geometry.centre);
-    let (probe, fold) = cast_rays(template, setup.surface, &at_fold, fold_points.core, &fold_points.targets, orient);
+    let (mut probe, mut fold) =
+        cast_rays(template, setup.surface, &at_fold, fold_points.core, &fold_points.targets, orient);
+    land_missed_fold_rays(&mut probe, &mut fold, setup.surface);
     if !probe.valid() {
         return Err(transition_failure(setup, branch, j.geometry, 1.0, &probe));
     }
     Ok(FoldCast { params, points, fold: ProjectedSection { in_junction: true, ..fold } })
 }
 
+/// A folded section's ray that meets no wall within its reach (its sector runs out down a
+/// branch leaving a few degrees from its neighbour) lands on the wall point nearest its ray at
+/// the mean distance its two neighbours in the ring met the wall.
+fn land_missed_fold_rays(probe: &mut Probe, fold: &mut ProjectedSection, surface: &LumenSurface) {
+    if probe.misses == 0 || probe.from_outside > 0 {
+        return;
+    }
+    let m = fold.surface.len();
+    let missed = std::mem::take(&mut probe.missed);
+    let hit = |k: usize| !missed.contains(&k);
+    for &k in &missed {
+        let (a, b) = ((k + m - 1) % m, (k + 1) % m);
+        if !(hit(a) && hit(b)) {
+            probe.missed.push(k);
+            continue;
+        }
+        let reach = 0.5 * ((fold.surface[a] - fold.origins[a]).norm() + (fold.surface[b] - fold.origins[b]).norm());
+        let landed = surface.closest(&(fold.origins[k] + fold.dirs[k] * reach)).point;
+        let d = landed - fold.origins[k];
+        if d.norm() > 0.0 {
+            fold.surface[k] = landed;
+            fold.dirs[k] = d.normalize();
+            probe.misses -= 1;
+        } else {
+            probe.missed.push(k);
+        }
+    }
+}
+
 /// Direction in which a transition arrives at the fold at the template point `xy`.
 fn fold_arrival(j: &JunctionEnd, template: &SectionTemplate, xy: &Vector2<f64>) -> Vector3<f64> {
-    j.geometry.arrival(j.fold.slot, &crate::junction::turn(j.fold.quarter_turns, xy), &j.fold.spine_cut(template))
+    j.geometry.arrival(j.fold.slot, &crate::junction::turn(j.fold.quarter_turns, xy), template.core_size)
 }
 
 /// A guide curve (Hermite end points and tangents) for each ring node.
@@ -748,7 +903,7 @@ fn guided_section(
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     keep_core_off_the_wall(&mut p, guide_at, setup.template, setup.surface);
     let targets = guided_targets(&p, guide_at, setup.template, j.geometry.radius);
-    let (probe, section) = cast_rays(
+    let (mut probe, mut section) = cast_rays(
         setup.template,
         setup.surface,
         &CenterlineSample { point: p.centre, ..sample },
@@ -756,7 +911,36 @@ fn guided_section(
         &targets,
         orient,
     );
+    land_missed_rays_near_guides(&mut probe, &mut section, guide_at, setup);
     (probe, ProjectedSection { in_junction: true, ..section })
+}
+
+/// A transition's ray that meets no wall (aimed through its guide point, it runs out down a
+/// neighbour's lumen where the junction's surface turns sharply) lands on the wall point nearest
+/// its guide point, which lies between its wall nodes on the ordinary and on the folded section:
+/// the node then keeps its place between them, and the elements around it are judged (and
+/// optimised) as any.
+fn land_missed_rays_near_guides(
+    probe: &mut Probe,
+    section: &mut ProjectedSection,
+    guide_at: &[Point3<f64>],
+    setup: &ProjectionSetup,
+) {
+    if probe.misses == 0 || probe.from_outside > 0 {
+        return;
+    }
+    for k in std::mem::take(&mut probe.missed) {
+        let origin = section.origins[k];
+        let landed = setup.surface.closest(&guide_at[k]).point;
+        let d = landed - origin;
+        if d.norm() > 0.0 {
+            section.surface[k] = landed;
+            section.dirs[k] = d.normalize();
+            probe.misses -= 1;
+        } else {
+            probe.missed.push(k);
+        }
+    }
 }
 
 /// The sections strictly between `station` and the fold, each ray aimed at `guide(k, u)`.

@@ -59,9 +59,13 @@ pub struct JunctionReport {
     /// Centre and radius (output unit).
     pub centre: [f64; 3],
     pub radius: f64,
-    /// Branches counter-clockwise about the spine, the parent first among them.
+    /// Branches counter-clockwise about the spine (a book), or the parent first (sectors).
     pub branches: Vec<String>,
-    pub spine_axis: [f64; 3],
+    /// How the branches' folds meet: `book` (pages about a straight spine) or `sectors`
+    /// (around a non-planar junction; see docs/guide/junctions.md).
+    pub arrangement: &'static str,
+    /// The book's spine (null for sectors).
+    pub spine_axis: Option<[f64; 3]>,
     /// How the wall grew from the junction's lumen-surface nodes: `smoothed_normal`, `normal`
     /// or `ray` (the best of them, see docs/guide/junctions.md).
     pub wall_growth: crate::volume::JunctionWall,
@@ -87,6 +91,10 @@ pub struct JunctionReport {
 /// One vessel end: found on the surface (or given), and whether the mesh reaches it.
 #[derive(Debug, Clone, Serialize)]
 pub struct EndReport {
+    /// The end's name in the mesh (its OpenFOAM patch, its sets `lumen_<name>` and
+    /// `wall_<name>`): `inlet`, `outlet` or `outlet_1`, ..., or the name of the cap given for it;
+    /// for an end not meshed, the cap's name or null.
+    pub name: Option<String>,
     /// Centre of the end (output unit): a loop's or cap's centre, a dome's inscribed ball, a
     /// given point's ball, or a given centerline's end point.
     pub position: [f64; 3],

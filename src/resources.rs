@@ -24,16 +24,37 @@ pub fn default_max_memory() -> u64 {
 
 /// Physical memory (Linux: `MemTotal`), or the cgroup's limit when lower.
 fn machine_memory() -> Option<u64> {
-    let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|text| {
-        let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
-        let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-        Some(kib * 1024)
-    })?;
-    let limit = ["/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"]
-        .iter()
-        .filter_map(|f| std::fs::read_to_string(f).ok()?.trim().parse::<u64>().ok())
-        .min();
+    let total = meminfo("MemTotal:")?;
+    let limit = CGROUP_FILES.iter().filter_map(|(limit, _)| read_number(limit)).min();
     Some(limit.map_or(total, |l| l.min(total)))
+}
+
+/// The memory the machine can give now without swapping (Linux: `MemAvailable`), or the
+/// room left under the cgroup's limit when less.
+pub fn available_memory() -> Option<u64> {
+    let available = meminfo("MemAvailable:")?;
+    let room = CGROUP_FILES
+        .iter()
+        .filter_map(|(limit, usage)| Some(read_number(limit)?.saturating_sub(read_number(usage)?)))
+        .min();
+    Some(room.map_or(available, |r| r.min(available)))
+}
+
+/// The cgroup's memory limit and usage files (v2, then v1).
+const CGROUP_FILES: [(&str, &str); 2] = [
+    ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+    ("/sys/fs/cgroup/memory/memory.limit_in_bytes", "/sys/fs/cgroup/memory/memory.usage_in_bytes"),
+];
+
+/// A line of /proc/meminfo, in bytes.
+fn meminfo(key: &str) -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let kib: u64 = text.lines().find(|l| l.starts_with(key))?.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+fn read_number(path: &str) -> Option<u64> {
+    std::fs::read_to_string(path).ok()?.trim().parse().ok()
 }
 
 /// Parses a size: a number of bytes with an optional binary suffix, `K`, `M`, `G` or `T` (`KiB`,

@@ -1,5 +1,11 @@
 //! Small in-memory vessels for unit tests and benchmarks of the later stages (writers, quality),
 //! so those do not depend on files. The shipped fixtures (`fixtures/`) are the end-to-end inputs.
+//! The mutation suite (issue 45) lives in [`mutations`] (the real vessels written the ways
+//! users' tools write them) and [`suite`] (each meshed and judged).
+
+pub mod decimate;
+pub mod mutations;
+pub mod suite;
 
 use crate::config::MeshConfig;
 use crate::error::Result;

@@ -500,3 +500,39 @@ fn bare_branched_surface_meshes_with_computed_centerlines() {
     assert_bars("bare aortoiliac", &f);
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// Junctions no book of pages orders, laid out in sectors: four side branches leaving an
+/// aorta at one place at right angles (six branches, the parent and its continuation with
+/// them: the cube's layout) and three leaving like a tripod's legs at 60 degrees from the
+/// downstream axis (five, strongly non-planar). Each meshes conformal, every sector's nodes
+/// shared by the two branches beside it, within the bars at the coarse preset.
+#[test]
+fn non_planar_junctions_mesh_in_sectors_within_the_bars() {
+    let dir = temp_dir("sectors");
+    let branch =
+        |radius, angle_deg, azimuth_deg| SideBranch { radius, angle_deg, azimuth_deg, anchor_radii: 0.0 };
+    let cases = [
+        ("four side branches at right angles", vec![
+            branch(1.2, 90.0, 0.0),
+            branch(1.2, 90.0, 90.0),
+            branch(1.2, 90.0, 180.0),
+            branch(1.2, 90.0, 270.0),
+        ], 6),
+        ("three side branches like a tripod's legs", vec![
+            branch(1.0, 60.0, 0.0),
+            branch(1.0, 60.0, 120.0),
+            branch(1.0, 60.0, 240.0),
+        ], 5),
+    ];
+    for (name, branches, slots) in cases {
+        let fan = SideBranchFan { parent_radius: 2.0, branches, free_length_radii: 4.0 };
+        let written = write_branching_fixture(&fan.fixture("sectors").unwrap(), &dir).unwrap();
+        let m = mesh(&written.stl, &written.centerlines, LengthUnit::Mm, &MeshConfig::preset(Preset::Coarse));
+        assert_eq!(m.junctions.len(), 1, "{name}: one junction");
+        assert_eq!(m.junctions[0].slots.len(), slots, "{name}: every branch at it");
+        assert_eq!(m.junctions[0].arrangement_name(), "sectors", "{name}: laid out in sectors");
+        let f = check_all(name, &m);
+        assert_bars(name, &f);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

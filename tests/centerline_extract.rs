@@ -365,6 +365,7 @@ fn the_mesh_starts_at_the_inlet_the_extraction_chose() {
         centerline_units: None,
         max_memory: vesselhex::resources::default_max_memory(),
         warnings: vec![],
+        caps: vec![],
     };
     let vessel = mesh_surface(surface, CenterlineSource::Extract(options), settings, &mut Progress::new(true, 9))
         .unwrap_or_else(|e| panic!("{e}"));

@@ -262,3 +262,89 @@ fn write_stl_without_triangles_near(src: &str, dst: &Path, z: f64) {
     out.extend_from_slice(&kept);
     std::fs::write(dst, out).unwrap();
 }
+
+/// The hex counts of the summary line ("N lumen + N wall + N extension hexes"), by part.
+fn summary_counts(stderr: &str) -> Vec<(String, u64)> {
+    let line = stderr.lines().find(|l| l.contains(" lumen + ")).unwrap_or_else(|| panic!("no summary line: {stderr}"));
+    let counts = line.trim_start_matches("vesselhex: ").split(';').next().unwrap().trim_end_matches(" hexes");
+    counts
+        .split(" + ")
+        .map(|part| {
+            let (n, name) = part.split_once(' ').unwrap_or_else(|| panic!("{part:?} in {line}"));
+            (name.to_string(), n.parse().unwrap_or_else(|_| panic!("{n:?} in {line}")))
+        })
+        .collect()
+}
+
+/// The summary line's parts add up to the mesh's hexes: the flow extensions' are counted, with
+/// and without them (issue 44: "6160 lumen + 3696 wall" for a mesh of 14176).
+#[test]
+fn the_summary_line_counts_every_hex_extensions_included() {
+    let (stl, csv) = fixture("curved");
+    let out = temp_dir("summary-line");
+    let case = out.join("case.toml");
+    std::fs::write(&case, "[extensions]\nends = \"all\"\n").unwrap();
+    for (name, extra) in [("plain", vec![]), ("extended", vec!["--config", path_str(&case)])] {
+        let dir = out.join(name);
+        let args = [
+            &["mesh", "--surface", path_str(&stl), "--centerlines", path_str(&csv)][..],
+            &extra,
+            &["--output", path_str(&dir)],
+        ];
+        let o = vesselhex(&args.concat());
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{name}: {stderr}");
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+        let counts = summary_counts(&stderr);
+        let total: u64 = counts.iter().map(|c| c.1).sum();
+        assert_eq!(total, r["elements"].as_u64().unwrap(), "{name}: {counts:?}");
+        let extension: u64 =
+            r["extensions"].as_array().into_iter().flatten().map(|e| e["elements"].as_u64().unwrap()).sum();
+        let mut expected = vec![
+            ("lumen".to_string(), r["lumen"]["elements"].as_u64().unwrap()),
+            ("wall".to_string(), r["wall"]["elements"].as_u64().unwrap()),
+        ];
+        if name == "extended" {
+            assert!(extension > 0, "the extensions have hexes");
+            expected.push(("extension".to_string(), extension));
+        }
+        assert_eq!(counts, expected, "{name}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// `formats = []` writes report.json alone and says so, in report.json and on stderr.
+#[test]
+fn an_empty_format_list_warns_that_only_the_report_is_written() {
+    let (stl, csv) = fixture("straight");
+    let out = temp_dir("no-formats");
+    let case = out.join("case.toml");
+    std::fs::write(&case, "formats = []\n").unwrap();
+    let dir = out.join("mesh");
+    let o = vesselhex(
+        &["mesh", "--surface", path_str(&stl), "--centerlines", path_str(&csv), "--config", path_str(&case)]
+            .into_iter()
+            .chain(["--quiet", "--output", path_str(&dir)])
+            .collect::<Vec<_>>(),
+    );
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    let names: Vec<String> =
+        files_under(&dir).iter().map(|p| p.file_name().unwrap().to_string_lossy().into()).collect();
+    assert_eq!(names, ["report.json"]);
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    let said = |w: &str| w.contains("formats is empty") && w.contains("only report.json");
+    let warnings = r["warnings"].as_array().unwrap();
+    assert!(
+        warnings.iter().any(|w| w["kind"] == "settings" && said(w["message"].as_str().unwrap())),
+        "report.json warnings: {warnings:?}"
+    );
+    assert!(stderr.lines().any(|l| l.starts_with("vesselhex: warning: ") && said(l)), "stderr: {stderr}");
+    // Any format named: no such warning.
+    std::fs::write(&case, "formats = [\"vtu\"]\n").unwrap();
+    let r = mesh_cli(&stl, &csv, &out.join("vtu"), &["--config", path_str(&case)]);
+    assert!(!r["warnings"].as_array().unwrap().iter().any(|w| said(w["message"].as_str().unwrap())));
+    let _ = std::fs::remove_dir_all(&out);
+}

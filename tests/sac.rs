@@ -145,6 +145,7 @@ fn a_sac_holding_a_junction_is_its_own_region() {
         centerline_units: None,
         max_memory: vesselhex::resources::default_max_memory(),
         warnings: vec![],
+        caps: vec![],
     };
     let vessel = mesh_surface(
         surface,

@@ -59,6 +59,28 @@ fn unit(name: Option<&str>, what: &str) -> PyResult<Option<LengthUnit>> {
     name.map(|u| u.parse::<LengthUnit>().map_err(|e| config_error(format!("{what}={u:?}: {e}")))).transpose()
 }
 
+/// A surface given as a file (or a folder of wall and caps, or a wall with `caps`) or as arrays,
+/// with the caps given in files of their own.
+fn read_surface_and_caps(
+    path: Option<PathBuf>,
+    arrays: Option<(PyReadonlyArray2<f64>, PyReadonlyArray2<i64>)>,
+    caps: Vec<(String, PathBuf)>,
+    units: LengthUnit,
+    max_memory: u64,
+) -> PyResult<(TriangleSurface, Vec<vesselhex::input::NamedCap>)> {
+    let limits = vesselhex::input::ReadLimits::within(max_memory);
+    let in_parts = path.as_ref().is_some_and(|p| !caps.is_empty() || p.is_dir());
+    let (Some(path), true) = (&path, in_parts) else {
+        if !caps.is_empty() {
+            return Err(config_error("caps come with a wall file as the surface, not with arrays".into()));
+        }
+        return read_surface(path, arrays, units, max_memory).map(|s| (s, vec![]));
+    };
+    let files = vesselhex::input::surface_files(path, &caps).map_err(to_py)?;
+    let (surface, _, named) = vesselhex::input::read_surface_parts(&files, units, &limits).map_err(to_py)?;
+    Ok((surface, named))
+}
+
 /// A surface given as a file or as arrays.
 fn read_surface(
     path: Option<PathBuf>,
@@ -164,7 +186,7 @@ fn extract_options(inlet: Option<[f64; 3]>, ends: Vec<[f64; 3]>, units: LengthUn
     ExtractOptions {
         inlet: inlet.map_or(InletChoice::Largest, |p| InletChoice::Nearest(mm(p))),
         ends: ends.into_iter().map(mm).collect(),
-        sacs: vec![],
+        ..Default::default()
     }
 }
 
@@ -187,7 +209,7 @@ fn progress_calling(callback: Option<Py<PyAny>>, raised: std::sync::Arc<std::syn
 #[pyfunction]
 #[pyo3(signature = (*, surface_path=None, surface_arrays=None, centerlines_path=None, centerline_arrays=None,
     centerlines_computed=None, preset=None, config_path=None, config_dict=None, units=None, centerline_units=None,
-    output_units=None, formats=None, inlet=None, ends=vec![], max_memory=None, progress=None))]
+    output_units=None, formats=None, inlet=None, ends=vec![], max_memory=None, progress=None, caps=vec![]))]
 #[allow(clippy::too_many_arguments)]
 fn mesh(
     py: Python<'_>,
@@ -207,7 +229,11 @@ fn mesh(
     ends: Vec<[f64; 3]>,
     max_memory: Option<u64>,
     progress: Option<Py<PyAny>>,
+    caps: Vec<(String, PathBuf)>,
 ) -> PyResult<Mesh> {
+    for (name, _) in &caps {
+        vesselhex::input::check_end_name(name).map_err(|e| config_error(format!("caps: {e}")))?;
+    }
     let config = build_config(
         preset,
         config_path.clone(),
@@ -221,7 +247,8 @@ fn mesh(
     let raised = std::sync::Arc::new(std::sync::Mutex::new(None));
     let mut progress = progress_calling(progress, raised.clone());
     progress.stage("reading");
-    let surface = read_surface(surface_path.clone(), surface_arrays, config.units, max_memory)?;
+    let cap_files: Vec<PathBuf> = caps.iter().map(|(_, file)| file.clone()).collect();
+    let (surface, caps) = read_surface_and_caps(surface_path.clone(), surface_arrays, caps, config.units, max_memory)?;
     let cl_units = centerline_units.unwrap_or(config.units);
     let centerlines = match (centerlines_path.clone(), centerline_arrays, centerlines_computed) {
         (Some(path), None, None) => {
@@ -242,7 +269,7 @@ fn mesh(
         (None, None, None) => CenterlineSource::Extract(extract_options(inlet, ends, config.units)),
         _ => return Err(config_error("give the centerlines one way only".into())),
     };
-    let settings = MeshSettings { config: config.clone(), centerline_units, max_memory, warnings: vec![] };
+    let settings = MeshSettings { config: config.clone(), centerline_units, max_memory, warnings: vec![], caps };
     let vessel = py.detach(move || {
         let vessel = vesselhex::pipeline::mesh_surface(surface, centerlines, settings, &mut progress);
         progress.finish();
@@ -252,7 +279,8 @@ fn mesh(
         return Err(e);
     }
     let (vessel, timings) = vessel.map_err(to_py)?;
-    let inputs: Vec<PathBuf> = [surface_path, centerlines_path, config_path].into_iter().flatten().collect();
+    let inputs: Vec<PathBuf> =
+        [surface_path, centerlines_path, config_path].into_iter().flatten().chain(cap_files).collect();
     Ok(Mesh { vessel, config, timings, inputs })
 }
 
@@ -510,6 +538,132 @@ fn centerlines(
     Ok(Centerlines { extraction, units })
 }
 
+/// The cases of a batch as JSON: from a manifest file, or from rows (a JSON list of objects with
+/// the manifest's keys) whose relative paths are taken from `base`.
+#[pyfunction]
+#[pyo3(signature = (*, manifest=None, rows=None, base=None))]
+fn batch_cases(manifest: Option<PathBuf>, rows: Option<String>, base: Option<PathBuf>) -> PyResult<String> {
+    use vesselhex::batch::manifest;
+    let cases = match (manifest, rows) {
+        (Some(path), None) => manifest::read_manifest(&path).map_err(to_py)?,
+        (None, Some(rows)) => {
+            let rows: Vec<serde_json::Map<String, serde_json::Value>> = serde_json::from_str(&rows)
+                .map_err(|e| config_error(format!("cases: each case must be a dict of the manifest's keys ({e})")))?;
+            let base = base.unwrap_or_else(|| PathBuf::from("."));
+            manifest::cases_from_rows(&rows, &base, Path::new("cases")).map_err(to_py)?
+        }
+        _ => return Err(config_error("give the cases as a manifest file or as rows".into())),
+    };
+    json_text(&cases)
+}
+
+fn json_text(value: &impl serde::Serialize) -> PyResult<String> {
+    serde_json::to_string(value).map_err(|e| config_error(format!("internal: {e}")))
+}
+
+fn from_json<T: serde::de::DeserializeOwned>(text: &str, what: &str) -> PyResult<T> {
+    serde_json::from_str(text).map_err(|e| config_error(format!("{what}: {e}")))
+}
+
+/// A batch over an output folder (`vesselhex.mesh_many`): its cases planned, the folder locked
+/// while it lives.
+#[pyclass(module = "vesselhex._native", frozen)]
+struct Batch {
+    batch: vesselhex::batch::Batch,
+}
+
+#[pymethods]
+impl Batch {
+    #[new]
+    fn new(py: Python<'_>, cases: &str, settings: &str, output: PathBuf) -> PyResult<Batch> {
+        let cases: Vec<vesselhex::batch::Case> = from_json(cases, "cases")?;
+        let settings: vesselhex::batch::Settings = from_json(settings, "settings")?;
+        let batch = py.detach(|| vesselhex::batch::Batch::open(cases, settings, &output)).map_err(to_py)?;
+        Ok(Batch { batch })
+    }
+    /// The cases still to mesh: (name, job as JSON, fingerprint).
+    fn pending(&self) -> PyResult<Vec<(String, String, Option<String>)>> {
+        let settings = &self.batch.settings;
+        self.batch
+            .pending()
+            .map(|p| Ok((p.case.name.clone(), json_text(&self.batch.job(p, settings))?, p.fingerprint.clone())))
+            .collect()
+    }
+    /// Every case's row as JSON, in the cases' order, from those done before and `ran` (a JSON
+    /// list of the rows of the cases meshed now); writes the summary.
+    fn finish(&self, py: Python<'_>, ran: &str) -> PyResult<String> {
+        let ran: Vec<vesselhex::batch::Row> = from_json(ran, "rows")?;
+        json_text(&py.detach(|| self.batch.finish(ran)).map_err(to_py)?)
+    }
+    /// Meshes the pending cases here, each in a process `program args` runs, as `vesselhex
+    /// batch --jobs jobs` does; `event(kind, what)` is called with ("plan", what the memory plan
+    /// decided) first, then ("started" or "finished", the case's name). Returns every case's row
+    /// as JSON and what the memory plan decided.
+    fn run_local(
+        &self,
+        py: Python<'_>,
+        jobs: usize,
+        program: PathBuf,
+        args: Vec<String>,
+        event: Option<Py<PyAny>>,
+    ) -> PyResult<(String, String)> {
+        let child = vesselhex::batch::ChildCommand { program, args };
+        let raised = std::sync::Mutex::new(None::<PyErr>);
+        let tell = |kind: &str, what: &str| {
+            if let Some(event) = &event {
+                Python::attach(|py| {
+                    if let Err(e) = event.call1(py, (kind, what)) {
+                        raised.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(e);
+                    }
+                });
+            }
+        };
+        let rows = py.detach(|| {
+            let plan = self.batch.plan_memory(jobs);
+            tell("plan", &plan.message);
+            let rows = self.batch.run_local(&plan, &child, &mut |e| match e {
+                vesselhex::batch::Event::Started(case) => tell("started", &case.name),
+                vesselhex::batch::Event::Finished(row) => tell("finished", &row.case),
+            });
+            rows.map(|rows| (rows, plan.message))
+        });
+        if let Some(e) = raised.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            return Err(e);
+        }
+        let (rows, message) = rows.map_err(to_py)?;
+        Ok((json_text(&rows)?, message))
+    }
+}
+
+/// Meshes one case (a job from `Batch.pending`) in a process `program args` runs and returns
+/// its row as JSON: a Dask task's work.
+#[pyfunction]
+fn batch_run_case(
+    py: Python<'_>,
+    job: &str,
+    fingerprint: Option<String>,
+    program: PathBuf,
+    args: Vec<String>,
+) -> PyResult<String> {
+    let job: vesselhex::batch::Job = from_json(job, "job")?;
+    let child = vesselhex::batch::ChildCommand { program, args };
+    json_text(&py.detach(|| vesselhex::batch::run_case_in_child(&child, &job, fingerprint)))
+}
+
+/// The row of a case whose task failed before giving one, as JSON.
+#[pyfunction]
+fn batch_failed_row(case: &str, cause: &str) -> PyResult<String> {
+    json_text(&vesselhex::batch::Row::failed(case, vesselhex::batch::EXIT_ERROR, cause))
+}
+
+/// The body of `python -m vesselhex._case`: one case read on standard input, its row written on
+/// standard output; returns the exit code.
+#[pyfunction]
+fn batch_child(py: Python<'_>) -> PyResult<i32> {
+    vesselhex::output::install_signal_handlers().map_err(to_py)?;
+    Ok(py.detach(vesselhex::batch::child::child_main))
+}
+
 /// The formats `Mesh.write` knows: (name, what it writes).
 #[pyfunction]
 fn formats() -> Vec<(&'static str, &'static str)> {
@@ -522,6 +676,11 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh, m)?)?;
     m.add_function(wrap_pyfunction!(centerlines, m)?)?;
     m.add_function(wrap_pyfunction!(formats, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_cases, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_run_case, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_failed_row, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_child, m)?)?;
+    m.add_class::<Batch>()?;
     m.add_class::<Mesh>()?;
     m.add_class::<Centerlines>()?;
     m.add("VesselhexError", py.get_type::<VesselhexError>())?;

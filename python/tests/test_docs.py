@@ -65,7 +65,8 @@ CARGO = """cargo() {
 def test_documented_block_runs(lang, body, cli, tmp_path):
     # what the block uses beyond vesselhex and numpy: a skip outside CI, a failure under it
     for module, used in (("pyvista", "pyvista" in body or "to_pyvista" in body), ("meshio", "meshio" in body or "render_mesh" in body),
-                         ("matplotlib", "gallery.py" in body or "render_mesh" in body)):
+                         ("matplotlib", "gallery.py" in body or "render_mesh" in body),
+                         ("distributed", "dask" in body), ("pandas", "mesh_many" in body)):
         if used:
             require(module)
     body = quick(body, tmp_path)

@@ -13,6 +13,9 @@ arrays::
     m.write("out/aaa", formats=["vtu", "calculix"])
     grid = m.to_pyvista()                 # or m.to_meshio()
 
+A cohort is one call, here or on a Dask cluster: :func:`mesh_many` meshes the cases of a
+manifest, each in a process of its own, and returns the results table (a pandas DataFrame).
+
 The surface may be a file (STL, VTP, legacy VTK), ``(points, triangles)`` arrays, or a PyVista,
 meshio or VTK polydata object, so a VMTK or PyVista pipeline passes it straight in. Errors are
 :class:`VesselhexError` subclasses carrying the command line's one-line message. The GIL is
@@ -30,10 +33,12 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from . import _native
+from ._batch import mesh_many
 from ._native import ConfigError, FileError, GeometryError, InputError, VesselhexError
 
 __all__ = [
     "mesh",
+    "mesh_many",
     "centerlines",
     "formats",
     "Mesh",
@@ -383,12 +388,14 @@ def mesh(
     ends: Sequence[Point] = (),
     max_memory: Optional[int] = None,
     progress: Union[bool, Callable[[str], Any]] = False,
+    caps: Optional[Mapping[str, PathLike]] = None,
 ) -> Mesh:
     """Meshes a vessel, as ``vesselhex mesh`` does, and returns the :class:`Mesh` in memory.
 
     Args:
-        surface: the lumen surface: a file (``.stl``, ``.vtp``, ``.vtk``), ``(points, triangles)``
-            arrays, or a PyVista, meshio or VTK polydata object.
+        surface: the lumen surface: a file (``.stl``, ``.vtp``, ``.vtk``), a folder of the wall
+            and its caps (as ``--surface DIR``), ``(points, triangles)`` arrays, or a PyVista,
+            meshio or VTK polydata object.
         centerlines: a VMTK ``.vtp``/``.vtk`` or ``x,y,z,r`` ``.csv`` file, a :class:`Centerlines`,
             an ``(n, 4)`` array (x, y, z, radius; ``(n, 3)`` without radius) or a list of them,
             or polydata with lines; ``None`` computes them from the surface.
@@ -403,6 +410,9 @@ def mesh(
         ends: without centerlines, a point on each rounded cap.
         max_memory: bytes the run may plan to use (default three quarters of the machine's).
         progress: ``True`` prints each stage on stderr; a function is called with each stage's name.
+        caps: with a wall file as ``surface``, its caps in files of their own, by name, e.g.
+            ``{"inlet": "inlet.stl", "outlet_lica": "lica.stl"}`` (as ``--cap NAME=FILE``): each
+            names the end it closes (OpenFOAM patch, sets, ``report["ends"]``).
 
     Raises:
         VesselhexError: ``InputError``, ``ConfigError``, ``GeometryError`` or ``FileError``, with
@@ -438,5 +448,6 @@ def mesh(
         ends=[_point(e, "ends") for e in ends],
         max_memory=max_memory,
         progress=_progress(progress),
+        caps=[(str(name), os.fspath(file)) for name, file in (caps or {}).items()],
     )
     return Mesh(native)

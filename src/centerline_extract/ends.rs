@@ -2,6 +2,7 @@
 //! sharp rim), open boundary loops, and points given by the user.
 
 use crate::input::topology::{boundary_loops, loop_centre_and_area, triangle_neighbours, BOUNDARY, NON_MANIFOLD};
+use crate::input::NamedCap;
 use nalgebra::{Point3, Vector3};
 use std::collections::BTreeMap;
 
@@ -156,6 +157,65 @@ fn planar_regions(vertices: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<(Vec<
         })
         .collect()
 }
+
+/// The caps given in files of their own and joined to the wall (their triangles tagged, see
+/// [`crate::input::CAP_TAGS`]), each an end at its rim's centre whatever its shape.
+pub fn tagged_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: &[i64], given: &[NamedCap]) -> Vec<Cap> {
+    given
+        .iter()
+        .filter_map(|cap| {
+            let tag = cap.tag?;
+            let own: Vec<u32> = (0..triangles.len() as u32).filter(|&t| tags.get(t as usize) == Some(&tag)).collect();
+            let tris: Vec<[u32; 3]> = own.iter().map(|&t| triangles[t as usize]).collect();
+            let loops = boundary_loops(&tris);
+            let [rim] = loops.as_slice() else { return None };
+            let (centre, area) = loop_centre_and_area(vertices, rim);
+            let radius = (area.norm() / std::f64::consts::PI).sqrt();
+            let end = VesselEnd { centre, radius, kind: EndKind::Cap { tag: Some(tag) } };
+            Some(Cap { triangles: own, end, sharp_rim: true })
+        })
+        .collect()
+}
+
+/// The name of each end that a cap given names: the end nearest the cap's rim centre, within
+/// [`NAMED_END_REACH`] of the larger of their radii. A cap that names no end, or an end named by
+/// two caps, is refused (the message names the cap's file).
+pub fn names_of_ends(ends: &[VesselEnd], caps: &[NamedCap]) -> Result<Vec<Option<String>>, String> {
+    let mut names: Vec<Option<String>> = vec![None; ends.len()];
+    for cap in caps {
+        let gap = |e: &VesselEnd| (e.centre - cap.centre).norm();
+        let nearest = (0..ends.len())
+            .filter(|&k| ends[k].kind != EndKind::Sac)
+            .min_by(|&a, &b| gap(&ends[a]).total_cmp(&gap(&ends[b])));
+        let Some(k) = nearest.filter(|&k| gap(&ends[k]) <= NAMED_END_REACH * ends[k].radius.max(cap.radius)) else {
+            let c = cap.centre;
+            return Err(format!(
+                "the cap {} ({}) at ({:.3}, {:.3}, {:.3}) mm closes no end of the surface: give the caps of this wall \
+                 (in the same units and frame)",
+                cap.name,
+                cap.file.display(),
+                c.x,
+                c.y,
+                c.z
+            ));
+        };
+        if let Some(other) = &names[k] {
+            return Err(format!(
+                "the caps {other} and {} ({}) both close the end at ({:.3}, {:.3}, {:.3}) mm: give one cap per end",
+                cap.name,
+                cap.file.display(),
+                ends[k].centre.x,
+                ends[k].centre.y,
+                ends[k].centre.z
+            ));
+        }
+        names[k] = Some(cap.name.clone());
+    }
+    Ok(names)
+}
+
+/// A cap names the end within this many radii (its own or the end's) of its rim's centre.
+const NAMED_END_REACH: f64 = 1.0;
 
 /// The centre and equivalent radius of the triangles when they form a flat, roughly round disc
 /// bounded by a single loop.

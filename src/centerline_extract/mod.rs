@@ -7,22 +7,19 @@
 //! VMTK's centerlines are paths of minimal cost `1/R` through the Voronoi diagram of the surface
 //! points, whose vertices are centres of maximal empty balls (the medial axis) with `R` their
 //! radius. We keep that principle, which centres the line by construction and gives the radius
-//! for free, but replace the two fragile parts:
+//! for free:
 //!
-//! * **Medial balls without a 3D Delaunay tessellation.** Every surface vertex gets its maximal
-//!   empty ball by the *shrinking-ball* algorithm (Ma, Bae, Bhatt & Lee, "3D medial axis point
-//!   approximation using nearest neighbors and the normal field", Vis. Comput. 2012): a ball
-//!   tangent at the vertex on its inner side is shrunk until no other vertex lies inside. Its
-//!   centre is the vertex's Voronoi pole, the same point VMTK's poles approximate, found with
-//!   a few k-d tree queries per vertex: no robust-predicate Delaunay code, no qhull/TetGen (C,
-//!   C++, AGPL), no slivers, parallel and deterministic.
-//! * **A graph of overlapping balls instead of Voronoi faces.** Balls closer than a tenth of
-//!   their radius are merged; two balls are linked when their centres are closer than half the
-//!   smaller radius, so every link lies in the union of two empty balls, i.e. inside the lumen,
-//!   and is short enough not to cut corners. Dijkstra with VMTK's cost `length x mean(1/R)` from the inlet gives all the paths at
-//!   once, sharing the inlet part exactly as VMTK's do.
+//! * **Medial balls from the inner Voronoi diagram** (`sampling`, `voronoi`): the surface, closed
+//!   by a fan on every boundary loop, is resampled at a spacing set by the local radius, so that
+//!   thin vessels and coarse triangles alike get enough points; their 3D Delaunay tessellation
+//!   (Qhull's C library, vendored and compiled with the `cc` crate, see `qhull`) gives a ball per
+//!   tetrahedron, its circumsphere, kept when its centre passes VMTK's test of an internal
+//!   tetrahedron (inside the tangent planes at the four corners). Tetrahedra sharing a face give
+//!   a link when their balls overlap, so every link lies in the union of two empty balls, i.e.
+//!   inside the lumen. Dijkstra with VMTK's cost `length x mean(1/R)` from the inlet gives all
+//!   the paths at once, sharing the inlet part exactly as VMTK's do.
 //!
-//! The path through ball centres zig-zags at the scale of the merge distance, so it is
+//! The path through ball centres zig-zags at the scale of the sample spacing, so it is
 //! resampled at a tenth of the radius and smoothed with a Gaussian in arc length of width
 //! 0.25 r (corner cutting in a bend of radius `Rb` is about `(0.25 r)^2 / 2Rb`, well below
 //! 1 % of r on every vessel we have). Where the depth is nearly flat across a section, the path
@@ -54,6 +51,7 @@
 mod centring;
 mod ends;
 mod medial;
+mod qhull;
 mod rounded;
 mod sampling;
 mod split;
@@ -61,13 +59,12 @@ mod split;
 mod voronoi;
 mod vtp;
 
-use ends::Cap;
-pub use ends::{EndKind, Hole, InletChoice, VesselEnd, CAP_SPAN, END_SPAN};
+pub use ends::{find_caps, names_of_ends, Cap, EndKind, Hole, InletChoice, VesselEnd, CAP_SPAN, END_SPAN};
 pub use split::branch_split;
 pub use vtp::{write_branch_split, write_vtp};
 
 use crate::error::{Error, Result};
-use crate::input::{topology, CenterlinePolyline, Centerlines, TriangleSurface};
+use crate::input::{topology, CenterlinePolyline, Centerlines, NamedCap, TriangleSurface};
 use crate::surface::LumenSurface;
 use indexmap::IndexMap;
 use medial::{Ball, BallGraph};
@@ -92,6 +89,8 @@ const MARCH_PATIENCE: usize = 4;
 const FAR_FROM_SURFACE: f64 = 2.0;
 /// A blunt face within this many radii (its own or an end's) of an end found is that end's tip.
 const BLUNT_SAME_END: f64 = 3.0;
+/// A cap of this name is the inlet (unless `--inlet` chooses another end).
+pub const INLET_NAME: &str = "inlet";
 /// Two largest ends closer than this ratio make the automatic inlet choice worth a note.
 const AMBIGUOUS_INLET: f64 = 0.9;
 
@@ -104,11 +103,15 @@ pub struct ExtractOptions {
     /// Points near the domes of saccular aneurysms the search does not take as sacs: ends of kind
     /// [`EndKind::Sac`] (meshed as blind branches closed by a dome).
     pub sacs: Vec<Point3<f64>>,
+    /// Caps given in files of their own (see [`crate::input::read_surface_parts`]): each joined
+    /// one (tagged) is an end whatever its shape, in place of the flat caps the search would
+    /// find, and every one names the end it closes or covers.
+    pub caps: Vec<NamedCap>,
 }
 
 impl Default for ExtractOptions {
     fn default() -> Self {
-        ExtractOptions { inlet: InletChoice::Largest, ends: vec![], sacs: vec![] }
+        ExtractOptions { inlet: InletChoice::Largest, ends: vec![], sacs: vec![], caps: vec![] }
     }
 }
 
@@ -121,6 +124,8 @@ pub struct Extraction {
     pub ends: Vec<VesselEnd>,
     /// Index of the inlet in `ends`; the polylines go to the other ends in order.
     pub inlet: usize,
+    /// The name of each end a cap given names (see [`ExtractOptions::caps`]), in `ends`' order.
+    pub end_names: Vec<Option<String>>,
     /// Boundary loops left out as holes in the wall (too small for the vessel around them).
     pub holes: Vec<Hole>,
     /// Facts worth telling the user (repairs, caps removed, ambiguous inlet).
@@ -131,7 +136,7 @@ pub struct Extraction {
 /// failures (too few ends, an end not connected to the inlet) are errors naming the fix.
 pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) -> Result<Extraction> {
     let mut notes = vec![];
-    let mut search = EndSearch::new(surface, &mut notes)?;
+    let mut search = EndSearch::new(surface, &options.caps, &mut notes)?;
     search.add_given(&options.ends, EndKind::Given)?;
     search.add_given(&options.sacs, EndKind::Sac)?;
     search.add_rounded();
@@ -150,13 +155,19 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
             ),
         ));
     }
-    let inlet = ends::choose_inlet(&found, options.inlet);
-    if options.inlet == InletChoice::Largest {
+    let end_names = ends::names_of_ends(&found, &options.caps).map_err(|e| Error::input(&surface.source, e))?;
+    // A cap named inlet is the inlet, unless the user chose another.
+    let named_inlet = end_names.iter().position(|n| n.as_deref() == Some(INLET_NAME));
+    let inlet = match (options.inlet, named_inlet) {
+        (InletChoice::Largest, Some(k)) => k,
+        (choice, _) => ends::choose_inlet(&found, choice),
+    };
+    if options.inlet == InletChoice::Largest && named_inlet.is_none() {
         notes.extend(ambiguous_inlet(&found));
     }
     let polylines = trace(&graph, &found, &end_nodes, inlet, &lumen)?;
     let centerlines = Centerlines { polylines, source: surface.source.clone() };
-    Ok(Extraction { centerlines, ends: found, inlet, holes, notes })
+    Ok(Extraction { centerlines, ends: found, inlet, end_names, holes, notes })
 }
 
 /// A note when the two largest ends have nearly the same radius (see [`AMBIGUOUS_INLET`]).
@@ -192,12 +203,10 @@ struct EndSearch {
 impl EndSearch {
     /// The medial axis, and the ends with a boundary: loops and cut flat caps that span the
     /// vessel behind them.
-    fn new(surface: &TriangleSurface, notes: &mut Vec<String>) -> Result<EndSearch> {
+    fn new(surface: &TriangleSurface, given_caps: &[NamedCap], notes: &mut Vec<String>) -> Result<EndSearch> {
         let (source, vertices) = (&surface.source, &surface.vertices);
         // Wound consistently for the closing below. Callers pass a surface `clean_surface` has
-        // already wound (and reported); what is left to flip is a non-orientable scrap, which
-        // each pass winds differently (4 triangles of openlb_cerebral_aneurysm_tree), so it is
-        // not reported again.
+        // already wound (and reported): nothing is left to flip.
         let mut triangles = surface.triangles.clone();
         topology::orient_consistently(&mut triangles);
         // The surface closed by a fan on every boundary loop (ends and holes alike) and facing
@@ -218,11 +227,15 @@ impl EndSearch {
         }));
         let tags = surface.triangle_tags.as_ref().map(|(_, t)| t.as_slice());
         // Flat caps: cut ones (a sharp rim) that span the vessel now; blunt ones (a rounded rim)
-        // later, in `add_blunt`.
-        let (caps, blunt): (Vec<Cap>, Vec<Cap>) = ends::find_caps(vertices, &triangles, tags)
-            .into_iter()
-            .filter(|cap| cap.end.radius >= CAP_SPAN * graph.pole(&cap.end.centre, 0.5 * cap.end.radius).radius)
-            .partition(|cap| cap.sharp_rim);
+        // later, in `add_blunt`. Caps given in files of their own are the caps, whatever their
+        // shape.
+        let (caps, blunt): (Vec<Cap>, Vec<Cap>) = match tags.filter(|_| !given_caps.is_empty()) {
+            Some(tags) => (ends::tagged_caps(vertices, &triangles, tags, given_caps), vec![]),
+            None => ends::find_caps(vertices, &triangles, tags)
+                .into_iter()
+                .filter(|cap| cap.end.radius >= CAP_SPAN * graph.pole(&cap.end.centre, 0.5 * cap.end.radius).radius)
+                .partition(|cap| cap.sharp_rim),
+        };
         if !caps.is_empty() {
             notes.push(format!("{} flat caps taken off", caps.len()));
         }

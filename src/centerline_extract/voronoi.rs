@@ -6,67 +6,14 @@
 //! graph wherever the lumen is connected: the property the centerline paths need, and the one a
 //! graph of nearby balls lacks where balls are sparse (narrow branches, coarse triangles).
 //!
-//! The Delaunay tessellation comes from Qhull (through the `qhull` crate), whose exact
+//! The Delaunay tessellation comes from Qhull's C library (see `qhull`), whose exact
 //! arithmetic handles the near-degenerate, nearly cospherical rings of points that structured
 //! vessel surfaces are made of.
 
 use super::medial::{Ball, BallGraph};
+use super::qhull::delaunay;
 use nalgebra::{Point3, Vector3};
-use qhull::QhBuilder;
 use rayon::prelude::*;
-
-/// The Delaunay tetrahedra of a point set: corner indices and, per tetrahedron, the
-/// tetrahedra it shares a face with.
-pub struct Delaunay {
-    pub tets: Vec<[u32; 4]>,
-    pub adjacent: Vec<Vec<u32>>,
-}
-
-/// The Delaunay tetrahedralisation of `points` (at least five, not all coplanar); `Err` with
-/// Qhull's own words when it cannot be built.
-pub fn delaunay(points: &[Point3<f64>]) -> Result<Delaunay, String> {
-    // The points are lifted to the paraboloid w = |x|^2, whose lower convex hull projects to the
-    // Delaunay tessellation (Qhull's 'd'); centred on their centroid and scaled uniformly (a
-    // non-uniform scale would change the tessellation), so that the lift stays well conditioned
-    // for vessels far from the origin.
-    let n = points.len().max(1) as f64;
-    let centroid = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
-    let scale = points.iter().map(|p| (p.coords - centroid).amax()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-    let coords: Vec<f64> = points
-        .iter()
-        .flat_map(|p| {
-            let q = (p.coords - centroid) / scale;
-            [q.x, q.y, q.z, q.norm_squared()]
-        })
-        .collect();
-    // 'QJ' joggles the input by a tiny deterministic amount (Qhull's fixed seed): sections of
-    // cospherical points (every ring of a straight tube's vertices) then give proper tetrahedra
-    // linked across each ring, where 'Qt' would leave flat ones that break the chain.
-    let qh = QhBuilder::default()
-        .qhull_args(["QJ"])
-        .map_err(|e| format!("Qhull options: {e:?}"))?
-        .delaunay(true)
-        .scale_last(true)
-        .build_managed(4, coords)
-        .map_err(|e| format!("Qhull could not tessellate the surface points: {e:?}"))?;
-    let mut index_of_id = std::collections::HashMap::new();
-    let mut tets = vec![];
-    let mut neighbour_ids = vec![];
-    for facet in qh.facets() {
-        if facet.upper_delaunay() {
-            continue;
-        }
-        let Some(vertices) = facet.vertices() else { continue };
-        let corners: Vec<u32> = vertices.iter().filter_map(|v| v.index(&qh)).map(|i| i as u32).collect();
-        let [a, b, c, d] = corners[..] else { continue };
-        index_of_id.insert(facet.id(), tets.len() as u32);
-        tets.push([a, b, c, d]);
-        neighbour_ids.push(facet.neighbors().map(|n| n.iter().map(|f| f.id()).collect::<Vec<_>>()).unwrap_or_default());
-    }
-    let adjacent =
-        neighbour_ids.iter().map(|ids| ids.iter().filter_map(|id| index_of_id.get(id).copied()).collect()).collect();
-    Ok(Delaunay { tets, adjacent })
-}
 
 /// The circumcentre of a tetrahedron, or `None` for a flat one (its circumcentre is not defined
 /// to any useful precision).

@@ -1,19 +1,23 @@
 //! Surface hygiene: what segmentation tools really write, made fit for meshing before anything
 //! else looks at it. Each step is counted in a [`HygieneReport`] (report.json `input.hygiene`).
 //!
-//! * coincident vertices (within 1e-9 of the bounding box's diagonal) are welded, so that the
-//!   triangles of a file that repeats its vertices per triangle share their edges;
+//! * coincident vertices (within 1e-9 of the diagonal of the bounding box of the points the
+//!   triangles use) are welded, so that the triangles of a file that repeats its vertices per
+//!   triangle share their edges; points no triangle uses are dropped;
 //! * triangles with no area (a repeated or collinear vertex) and repeated triangles are dropped;
-//! * the triangles are wound consistently across every manifold edge, facing out of the lumen
-//!   (edges shared by three or more triangles are tolerated and counted);
-//! * small disconnected fragments (less than [`FRAGMENT`] of the surface's area: stray
-//!   triangles, specks of a segmentation) are dropped; a second large piece is refused by name,
+//! * small pieces (triangles joined across edges of exactly two triangles; less than
+//!   [`FRAGMENT`] of the surface's area: stray triangles, specks of a segmentation, scraps
+//!   hanging off an edge of the wall) are dropped; an edge still shared by three or more
+//!   triangles (a fin, two sheets meeting) is refused by name, and so is a second large piece,
 //!   since a file should hold one vessel;
+//! * the triangles are wound consistently and facing out, in one canonical form whatever the
+//!   file's winding (see `orientation`);
 //! * a voxel staircase (a marching-cubes or cuberille surface straight from a label map, whose
 //!   triangles face a handful of directions) is smoothed with Taubin's lambda-mu filter, which
 //!   removes the steps without shrinking the vessel.
 
-use super::topology::{boundary_loops, orient_consistently, signed_volume6, triangle_neighbours, NON_MANIFOLD};
+use super::orientation::wind_outward;
+use super::topology::{boundary_loops, triangle_neighbours, NON_MANIFOLD};
 use super::TriangleSurface;
 use crate::error::{Error, Result};
 use nalgebra::{Point3, Vector3};
@@ -49,7 +53,6 @@ pub struct HygieneReport {
     pub degenerate_triangles_dropped: usize,
     pub duplicate_triangles_dropped: usize,
     pub triangles_flipped: usize,
-    pub non_manifold_edges: usize,
     pub fragments_dropped: usize,
     pub fragment_triangles_dropped: usize,
     /// Taubin passes (lambda-mu pairs) applied to a voxel staircase; 0 for a smooth surface.
@@ -57,6 +60,9 @@ pub struct HygieneReport {
     pub boundary_loops: usize,
     /// Whether the file's triangles faced into the lumen (they face out after hygiene).
     pub wound_inward: bool,
+    /// Edges of strips twisted between holes at a ragged rim, where no winding is consistent:
+    /// left as they are (see `orientation`).
+    pub twisted_rim_edges: usize,
 }
 
 impl HygieneReport {
@@ -72,7 +78,10 @@ impl HygieneReport {
         say(self.degenerate_triangles_dropped, "triangles without area dropped");
         say(self.duplicate_triangles_dropped, "repeated triangles dropped");
         say(self.triangles_flipped, "triangles wound against their neighbours flipped");
-        say(self.non_manifold_edges, "edges shared by three or more triangles (tolerated)");
+        say(
+            self.twisted_rim_edges,
+            "edges of a strip twisted between holes at a rim (not orientable there) left as they are",
+        );
         if self.fragments_dropped > 0 {
             out.push(format!(
                 "{} small disconnected pieces ({} triangles, less than {}% of the area each) dropped",
@@ -97,14 +106,11 @@ pub fn clean_surface(mut surface: TriangleSurface) -> Result<(TriangleSurface, H
     let mut report = HygieneReport { vertices_welded: weld(&mut surface), ..Default::default() };
     drop_degenerate_and_repeated(&mut surface, &mut report);
     drop_fragments(&mut surface, &mut report)?;
-    report.triangles_flipped = orient_consistently(&mut surface.triangles);
-    let loops = boundary_loops(&surface.triangles);
-    report.wound_inward = signed_volume6(&surface.vertices, &surface.triangles, &loops) < 0.0;
-    if report.wound_inward {
-        surface.triangles.iter_mut().for_each(|t| t.swap(1, 2));
-    }
-    report.boundary_loops = loops.len();
-    report.non_manifold_edges = count_non_manifold(&surface.triangles);
+    let winding = wind_outward(&mut surface)?;
+    report.triangles_flipped = winding.flipped;
+    report.wound_inward = winding.inward;
+    report.twisted_rim_edges = winding.twisted_edges;
+    report.boundary_loops = boundary_loops(&surface.triangles).len();
     if is_staircase(&surface) {
         taubin(&mut surface);
         report.staircase_smoothing_passes = TAUBIN_PAIRS;
@@ -112,19 +118,43 @@ pub fn clean_surface(mut surface: TriangleSurface) -> Result<(TriangleSurface, H
     Ok((surface, report))
 }
 
-fn diagonal(vertices: &[Point3<f64>]) -> f64 {
-    let Some(first) = vertices.first() else { return 0.0 };
-    let (lo, hi) = vertices.iter().fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
+/// The diagonal of the bounding box of the points the triangles use.
+fn diagonal(surface: &TriangleSurface) -> f64 {
+    let mut used = surface.triangles.iter().flatten().map(|&v| surface.vertices[v as usize]);
+    let Some(first) = used.next() else { return 0.0 };
+    let (lo, hi) = used.fold((first, first), |(lo, hi), p| (lo.inf(&p), hi.sup(&p)));
     (hi - lo).norm()
 }
 
-/// Welds vertices within [`WELD`] of the diagonal (the first of a group is kept, in index
-/// order) and drops the vertices no triangle uses; returns how many were merged.
-fn weld(surface: &mut TriangleSurface) -> usize {
-    let tol = WELD * diagonal(&surface.vertices);
-    if tol <= 0.0 {
-        return 0;
+/// Welds vertices within [`WELD`] of the diagonal of the points in use (the first of a group
+/// is kept, in index order) and drops the points no triangle uses (the others keep their
+/// order); returns how many were merged. A tolerance relative to the surface's size holds at
+/// any scale and unit.
+pub fn weld(surface: &mut TriangleSurface) -> usize {
+    let tol = WELD * diagonal(surface);
+    let merged = if tol > 0.0 { merge_coincident(surface, tol) } else { 0 };
+    drop_unused_points(surface);
+    merged
+}
+
+/// Drops the points no triangle uses, the others renumbered in their order.
+fn drop_unused_points(surface: &mut TriangleSurface) {
+    let mut index = vec![u32::MAX; surface.vertices.len()];
+    surface.triangles.iter().flatten().for_each(|&v| index[v as usize] = 0);
+    let mut kept = 0;
+    for (i, slot) in index.iter_mut().enumerate() {
+        if *slot == 0 {
+            *slot = kept;
+            surface.vertices[kept as usize] = surface.vertices[i];
+            kept += 1;
+        }
     }
+    surface.vertices.truncate(kept as usize);
+    surface.triangles.iter_mut().for_each(|t| *t = t.map(|v| index[v as usize]));
+}
+
+/// Merges every vertex within `tol` of an earlier one into it; how many were merged.
+fn merge_coincident(surface: &mut TriangleSurface, tol: f64) -> usize {
     let key = |p: &Point3<f64>| (p / tol).map(|c| c.floor() as i64);
     let mut cells: HashMap<(i64, i64, i64), Vec<u32>> = HashMap::new();
     let mut target: Vec<u32> = (0..surface.vertices.len() as u32).collect();
@@ -186,8 +216,9 @@ fn retain_triangles(surface: &mut TriangleSurface, keep: &[bool]) {
     }
 }
 
-/// Triangles joined across shared edges (manifold or not) into pieces: the index of each
-/// triangle's piece, pieces numbered by their first triangle.
+/// Triangles joined across manifold edges (edges of exactly two triangles) into pieces: the
+/// index of each triangle's piece, pieces numbered by their first triangle. A scrap hanging off
+/// an edge of the wall (three triangles on that edge) is a piece of its own.
 fn pieces(triangles: &[[u32; 3]]) -> Vec<u32> {
     let mut parent: Vec<u32> = (0..triangles.len() as u32).collect();
     fn find(parent: &mut [u32], mut x: u32) -> u32 {
@@ -197,17 +228,9 @@ fn pieces(triangles: &[[u32; 3]]) -> Vec<u32> {
         }
         x
     }
-    let mut edges: Vec<(u32, u32, u32)> = triangles
-        .iter()
-        .enumerate()
-        .flat_map(|(t, tri)| {
-            (0..3).map(move |k| (tri[k].min(tri[(k + 1) % 3]), tri[k].max(tri[(k + 1) % 3]), t as u32))
-        })
-        .collect();
-    edges.sort_unstable();
-    for w in edges.windows(2) {
-        if (w[0].0, w[0].1) == (w[1].0, w[1].1) {
-            let (a, b) = (find(&mut parent, w[0].2), find(&mut parent, w[1].2));
+    for (t, nb) in triangle_neighbours(triangles).iter().enumerate() {
+        for &u in nb.iter().filter(|&&u| u < NON_MANIFOLD) {
+            let (a, b) = (find(&mut parent, t as u32), find(&mut parent, u));
             if a != b {
                 parent[a.max(b) as usize] = a.min(b);
             }
@@ -217,7 +240,8 @@ fn pieces(triangles: &[[u32; 3]]) -> Vec<u32> {
 }
 
 /// Keeps the largest piece (by area); drops pieces under [`FRAGMENT`] of the total area;
-/// refuses a second piece over [`SECOND_VESSEL`] of the largest.
+/// refuses an edge still shared by three or more triangles, then a second piece over
+/// [`SECOND_VESSEL`] of the largest.
 fn drop_fragments(surface: &mut TriangleSurface, report: &mut HygieneReport) -> Result<()> {
     let piece = pieces(&surface.triangles);
     let v = &surface.vertices;
@@ -231,56 +255,68 @@ fn drop_fragments(surface: &mut TriangleSurface, report: &mut HygieneReport) -> 
         *area.entry(p).or_default() += area_of(t);
         *count.entry(p).or_default() += 1;
     }
-    if area.len() < 2 {
-        return Ok(());
-    }
     let total: f64 = area.values().sum();
     let mut by_area: Vec<(u32, f64)> = area.iter().map(|(&p, &a)| (p, a)).collect();
     by_area.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-    let largest = by_area[0].1;
-    if let Some(&(second, a)) = by_area.get(1).filter(|(_, a)| *a > SECOND_VESSEL * largest) {
-        let t = piece.iter().position(|&p| p == second).expect("a piece has triangles");
-        let c = surface.triangles[t].map(|i| v[i as usize]);
-        let centre = Point3::from((c[0].coords + c[1].coords + c[2].coords) / 3.0);
-        return Err(Error::input(
-            &surface.source,
-            format!(
-                "holds {} separate pieces; a second one of {} triangles ({:.0}% of the largest's area) lies near \
-                 ({:.3}, {:.3}, {:.3}) mm: give one vessel per file (split or join the pieces in your segmentation \
-                 tool)",
-                area.len(),
-                count[&second],
-                100.0 * a / largest,
-                centre.x,
-                centre.y,
-                centre.z
-            ),
-        ));
-    }
-    let dropped: Vec<u32> = by_area[1..].iter().filter(|(_, a)| *a < FRAGMENT * total).map(|(p, _)| *p).collect();
+    let dropped: Vec<u32> = by_area.iter().skip(1).filter(|(_, a)| *a < FRAGMENT * total).map(|(p, _)| *p).collect();
     let keep: Vec<bool> = piece.iter().map(|p| !dropped.contains(p)).collect();
     report.fragments_dropped = dropped.len();
     report.fragment_triangles_dropped = keep.iter().filter(|k| !**k).count();
     retain_triangles(surface, &keep);
-    Ok(())
+    refuse_non_manifold(surface)?;
+    let large = |(p, a): &&(u32, f64)| *a > SECOND_VESSEL * by_area[0].1 && !dropped.contains(p);
+    let Some(&(second, a)) = by_area.get(1).filter(large) else { return Ok(()) };
+    let t = piece.iter().position(|&p| p == second).expect("a piece has triangles");
+    let c = surface.triangles[keep[..t].iter().filter(|k| **k).count()].map(|i| surface.vertices[i as usize]);
+    let centre = Point3::from((c[0].coords + c[1].coords + c[2].coords) / 3.0);
+    Err(Error::input(
+        &surface.source,
+        format!(
+            "holds {} separate pieces; a second one of {} triangles ({:.0}% of the largest's area) lies near ({:.3}, \
+             {:.3}, {:.3}) mm: give one vessel per file (split or join the pieces in your segmentation tool)",
+            area.len() - dropped.len(),
+            count[&second],
+            100.0 * a / by_area[0].1,
+            centre.x,
+            centre.y,
+            centre.z
+        ),
+    ))
 }
 
-fn count_non_manifold(triangles: &[[u32; 3]]) -> usize {
-    let mut edges: Vec<(u32, u32)> = triangles
-        .iter()
-        .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
-        .collect();
-    edges.sort_unstable();
-    let mut n = 0;
-    let mut i = 0;
-    while i < edges.len() {
-        let j = edges[i..].iter().take_while(|e| **e == edges[i]).count();
-        if j > 2 {
-            n += 1;
+/// Refuses edges shared by three or more triangles, naming the first few: a fin or a second
+/// sheet on the wall leaves the lumen's inside undefined there.
+fn refuse_non_manifold(surface: &TriangleSurface) -> Result<()> {
+    let mut edges: Vec<[u32; 2]> = vec![];
+    for (tri, nb) in surface.triangles.iter().zip(triangle_neighbours(&surface.triangles)) {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            if nb[k] == NON_MANIFOLD {
+                edges.push([a.min(b), a.max(b)]);
+            }
         }
-        i += j;
     }
-    n
+    edges.sort_unstable();
+    edges.dedup();
+    if edges.is_empty() {
+        return Ok(());
+    }
+    let at = |v: u32| {
+        let p = surface.vertices[v as usize];
+        format!("({:.4}, {:.4}, {:.4})", p.x, p.y, p.z)
+    };
+    let named: Vec<String> = edges.iter().take(3).map(|[a, b]| format!("{} to {}", at(*a), at(*b))).collect();
+    Err(Error::input(
+        &surface.source,
+        format!(
+            "has {} non-manifold edge(s), each shared by three or more triangles (a fin or a second sheet on the wall): \
+             {}{} mm. Remove the extra triangles (e.g. MeshLab's Select Non Manifold Edges, then Delete) and save the \
+             surface again",
+            edges.len(),
+            named.join("; "),
+            if edges.len() > 3 { "; ..." } else { "" }
+        ),
+    ))
 }
 
 /// Whether the surface is a staircase: most of its area faces a handful of directions (see

@@ -5,6 +5,8 @@ mod arrays;
 mod centerline;
 mod csv;
 mod hygiene;
+mod orientation;
+mod parts;
 mod polydata;
 mod stl;
 mod surface;
@@ -17,9 +19,12 @@ use crate::resources::short;
 pub use crate::resources::ReadLimits;
 use crate::units::LengthUnit;
 pub use arrays::{centerlines_from_arrays, surface_from_arrays, PolylineArrays};
-pub use hygiene::{clean_surface, HygieneReport};
+pub use hygiene::{clean_surface, weld, HygieneReport};
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
+pub use parts::{
+    check_end_name, end_name_of_file, read_surface_parts, surface_files, NamedCap, SurfaceFiles, CAP_TAGS,
+};
 use polydata::PolyData;
 use std::path::{Path, PathBuf};
 

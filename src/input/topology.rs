@@ -38,39 +38,82 @@ pub fn triangle_neighbours(triangles: &[[u32; 3]]) -> Vec<[u32; 3]> {
     out
 }
 
+/// What [`orient`] found: the triangles' connected pieces across manifold edges, how many it
+/// flipped, and an edge that no choice of windings can make consistent, if any.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Orientation {
+    /// Triangles flipped.
+    pub flipped: usize,
+    /// Each triangle's piece (triangles joined across manifold edges), numbered by their first
+    /// triangle's order.
+    pub piece: Vec<u32>,
+    /// The manifold edges (their two vertices, lower first) whose two triangles still run them
+    /// the same way once the rest of their piece is consistent: the piece is not orientable (it
+    /// holds a Moebius band), so no winding faces one side of all of it. Empty when every piece
+    /// is orientable.
+    pub conflicts: Vec<[u32; 2]>,
+}
+
 /// Flips triangles so that every two triangles sharing a manifold edge traverse it in opposite
-/// directions (breadth-first over each connected component, the lowest-indexed triangle of a
-/// component keeping its winding). Returns the number of triangles flipped.
-pub fn orient_consistently(triangles: &mut [[u32; 3]]) -> usize {
+/// directions, whatever share of them the file wound the other way: each piece (triangles
+/// joined across manifold edges) is walked breadth-first from its lowest-indexed triangle,
+/// which keeps its winding, and every triangle reached is wound against the one it was reached
+/// from. Edges are compared by their vertices, as the file gave them, so a flip decided on the
+/// way does not change which edge is which.
+pub fn orient(triangles: &mut [[u32; 3]]) -> Orientation {
     let neighbours = triangle_neighbours(triangles);
-    let mut seen = vec![false; triangles.len()];
-    let mut flipped = 0;
+    let n = triangles.len();
+    // Whether each triangle is to be flipped; u8::MAX: not reached yet.
+    let mut flip = vec![u8::MAX; n];
+    let mut piece = vec![u32::MAX; n];
+    let mut conflicts = vec![];
     let mut queue = std::collections::VecDeque::new();
-    for start in 0..triangles.len() {
-        if seen[start] {
+    let mut pieces = 0;
+    for start in 0..n {
+        if flip[start] != u8::MAX {
             continue;
         }
-        seen[start] = true;
+        flip[start] = 0;
+        piece[start] = pieces;
         queue.push_back(start);
         while let Some(t) = queue.pop_front() {
             for k in 0..3 {
                 let u = neighbours[t][k];
-                if u >= NON_MANIFOLD || seen[u as usize] {
+                if u >= NON_MANIFOLD {
                     continue;
                 }
                 let (a, b) = (triangles[t][k], triangles[t][(k + 1) % 3]);
                 let other = triangles[u as usize];
                 let same_direction = (0..3).any(|m| other[m] == a && other[(m + 1) % 3] == b);
-                if same_direction {
-                    triangles[u as usize].swap(1, 2);
-                    flipped += 1;
+                // Run the same way in the file, the two must end up flipped differently.
+                let wanted = flip[t] ^ u8::from(same_direction);
+                match flip[u as usize] {
+                    u8::MAX => {
+                        flip[u as usize] = wanted;
+                        piece[u as usize] = pieces;
+                        queue.push_back(u as usize);
+                    }
+                    // Each conflicting edge once, from its lower-indexed triangle.
+                    f if f != wanted && (u as usize) > t => conflicts.push([a.min(b), a.max(b)]),
+                    _ => {}
                 }
-                seen[u as usize] = true;
-                queue.push_back(u as usize);
             }
         }
+        pieces += 1;
     }
-    flipped
+    let mut flipped = 0;
+    for (t, f) in triangles.iter_mut().zip(&flip) {
+        if *f == 1 {
+            t.swap(1, 2);
+            flipped += 1;
+        }
+    }
+    Orientation { flipped, piece, conflicts }
+}
+
+/// [`orient`], returning only the number of triangles flipped.
+pub fn orient_consistently(triangles: &mut [[u32; 3]]) -> usize {
+    orient(triangles).flipped
 }
 
 /// Closed boundary loops of a consistently wound triangle set, each as a vertex sequence in the
@@ -208,6 +251,73 @@ mod tests {
         }
         t[2].swap(1, 2);
         (v, t)
+    }
+
+    #[test]
+    fn patches_wound_the_other_way_are_made_consistent_whatever_their_share() {
+        // A closed cylinder of 24 x 10 quads and two fans; every other band of three rings wound
+        // the other way (more than half of the triangles), then the caps.
+        let (around, rings) = (24u32, 10u32);
+        let mut v: Vec<Point3<f64>> = (0..=rings)
+            .flat_map(|j| {
+                (0..around).map(move |i| {
+                    let a = std::f64::consts::TAU * i as f64 / around as f64;
+                    Point3::new(a.cos(), a.sin(), j as f64 * 0.3)
+                })
+            })
+            .collect();
+        let mut t = vec![];
+        for j in 0..rings {
+            for i in 0..around {
+                let (a, b) = (j * around + i, j * around + (i + 1) % around);
+                t.push([a, b, b + around]);
+                t.push([a, b + around, a + around]);
+            }
+        }
+        let (bottom, top) = (v.len() as u32, v.len() as u32 + 1);
+        v.extend([Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, rings as f64 * 0.3)]);
+        for i in 0..around {
+            t.push([bottom, (i + 1) % around, i]);
+            t.push([top, rings * around + i, rings * around + (i + 1) % around]);
+        }
+        let outward = t.clone();
+        let mut mixed = t.clone();
+        for (k, tri) in mixed.iter_mut().enumerate() {
+            if (k as u32 / (2 * around)) % 2 == 1 || k % 7 == 3 {
+                tri.swap(0, 1);
+            }
+        }
+        let found = orient(&mut mixed);
+        assert!(found.conflicts.is_empty());
+        assert!(found.piece.iter().all(|&p| p == 0));
+        // Every triangle faces as the outward one does, or every one the other way.
+        let same = |a: &[u32; 3], b: &[u32; 3]| (0..3).any(|r| [a[r], a[(r + 1) % 3], a[(r + 2) % 3]] == *b);
+        let agree = mixed.iter().zip(&outward).filter(|(a, b)| same(a, b)).count();
+        assert!(agree == t.len() || agree == 0, "{agree} of {} agree", t.len());
+    }
+
+    #[test]
+    fn a_moebius_band_is_found_not_orientable() {
+        // A band of 12 quads whose ends are joined with a half twist.
+        let n = 12u32;
+        let mut v = vec![];
+        for i in 0..n {
+            let a = std::f64::consts::TAU * i as f64 / n as f64;
+            let (w, c) = ((a / 2.0).cos() * 0.3, (a / 2.0).sin() * 0.3);
+            let centre = Point3::new(a.cos(), a.sin(), 0.0);
+            v.push(centre + Vector3::new(a.cos() * w, a.sin() * w, c));
+            v.push(centre - Vector3::new(a.cos() * w, a.sin() * w, c));
+        }
+        let mut t = vec![];
+        for i in 0..n {
+            let (a0, a1) = (2 * i, 2 * i + 1);
+            // The last quad joins the first pair swapped: the half twist.
+            let (b0, b1) = if i + 1 == n { (1, 0) } else { (2 * i + 2, 2 * i + 3) };
+            t.push([a0, b0, b1]);
+            t.push([a0, b1, a1]);
+        }
+        let _ = &v;
+        assert_eq!(orient(&mut t).conflicts.len(), 1);
     }
 
     #[test]

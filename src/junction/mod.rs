@@ -1,25 +1,36 @@
-//! Block topology at a junction: the "book of pages" of BRANCHING.md §1, built from the lumen
-//! surface and the centerline tree, without manual input.
+//! Block topology at a junction, built from the lumen surface and the centerline tree without
+//! manual input: every branch's O-grid is swept from its last ordinary cross-section to a
+//! *folded* end section laid on radial half-planes around the junction's centre X, which it
+//! shares with its neighbours, so the junction is conformal by construction and every hex of it
+//! belongs to exactly one branch.
 //!
-//! A straight *spine* crosses the junction through its centre X along an axis `a` normal to the
-//! (best-fit) plane of the branch directions. The k branches, ordered counter-clockwise about
-//! `a`, are separated by k half-plane *pages* hanging on the spine; each page is shared by the
-//! two branches on either side of it. The O-grid of every branch is swept from its last ordinary
-//! cross-section to a *folded* end section: the half of its template left of the grid line
-//! x = 0 is laid on one page, the right half on the other, and x = 0 on the spine. A page's
-//! nodes are computed once and given to both branches, so the junction is conformal by
-//! construction, and every hex of the junction belongs to exactly one branch.
+//! A fold lays the branch's square core onto four planar *sectors* around X, one per quadrant:
+//! the quadrant between the template's +x and +y half-axes onto the sector between the fold's
+//! +x and +y *spokes* (radial lines from X to the wall), and so on round. A template point
+//! (x, y) of that quadrant goes to `X + |y| depth_V dir_V + |x| depth_U dir_U`, U and V the
+//! spokes its signs pick, each spoke's depth its distance from X to the wall, so rays stay in
+//! their sector and reach the wall between the two branches sharing it. A sector's nodes are
+//! computed once and given to both branches.
+//!
+//! Two arrangements of the spokes (see [`Arrangement`]):
+//! * the *book of pages* (BRANCHING.md §1): a straight spine through X along an axis `a`
+//!   normal to the (best-fit) plane of the branch directions, its two ends spokes shared by
+//!   every branch; the k branches, ordered counter-clockwise about `a`, separated by k
+//!   half-plane pages, each holding one more spoke in its middle. Used wherever the branches
+//!   can be ordered about an axis (at least 25 degrees apart, none within 25 degrees of it),
+//!   and for every bifurcation (three branches admit no other arrangement);
+//! * *sectors* ([`layout`]): the spokes of the branches' spherical Delaunay triangulation, for
+//!   a junction whose branches leave in every direction (a non-planar junction, six branches at
+//!   one place), where a shared straight spine would run down one of them.
 //!
 //! Choices, defended in the README:
-//! * the axis maximises the smallest angular gap between the branch directions projected on the
-//!   plane normal to it (start: the best-fit plane's normal);
 //! * a page sits between its two branches at an angle split in proportion to their radii, so a
 //!   small side branch gets a narrow wedge and the large vessel keeps its cells;
-//! * the folded section is scaled by the distances from X to the wall along each page and along
-//!   the spine, so rays on a page stay inside it and are star-shaped from the spine;
 //! * each node of the transition follows a cubic Hermite curve from its place in the last
-//!   ordinary section (leaving along the centerline) to its place on the page (arriving across
-//!   the page), and the rays that find the lumen wall follow the same interpolation.
+//!   ordinary section (leaving along the centerline) to its place on the fold (arriving across
+//!   its sector), and the rays that find the lumen wall follow the same interpolation.
+
+pub mod layout;
 
 use crate::blocks::SectionTemplate;
 use crate::centerline::{Branch, CenterlineSample, CenterlineTree, Frame};
@@ -28,14 +39,38 @@ use crate::surface::LumenSurface;
 use nalgebra::{Matrix3, Point3, Vector2, Vector3};
 use std::f64::consts::{PI, TAU};
 
-/// Branches whose projected directions are closer than this about the spine cannot share a
-/// junction (BRANCHING.md §4.1).
+/// A book's branches whose projected directions are closer than this about the spine would fold
+/// onto narrow pages (BRANCHING.md §4.1): such a junction of four or more branches is laid out in
+/// sectors where they fold better.
 const MIN_ANGULAR_GAP_DEG: f64 = 25.0;
 /// The spine's axis is chosen among those every branch leaves at least this far off, where
 /// any is (see [`spine_axis`]).
 const AXIS_CLEARANCE_DEG: f64 = 25.0;
-/// Largest number of branches (parent included) at one junction.
-const MAX_BRANCHES: usize = 5;
+
+/// Which arrangements the analysis may use (see [`analyse_junctions`]).
+#[derive(Debug, Default)]
+pub struct LayoutPolicy {
+    /// Sectors at every junction of four or more branches that has a sector layout; otherwise
+    /// books only, and a junction no book orders is refused.
+    pub sectors: bool,
+    /// Set, with `sectors` off, when a junction of four or more branches has a sector layout,
+    /// or a book was refused: meshing again with sectors allowed gives another mesh.
+    pub sectors_differ: std::cell::Cell<bool>,
+}
+
+impl LayoutPolicy {
+    pub fn books_only() -> Self {
+        LayoutPolicy::default()
+    }
+
+    pub fn with_sectors() -> Self {
+        LayoutPolicy { sectors: true, ..LayoutPolicy::default() }
+    }
+}
+
+/// Largest number of branches a book takes (pages of 72 degrees at most, a spine shared by ten
+/// sectors).
+const MAX_BOOK_BRANCHES: usize = 5;
 
 /// One branch as seen from a junction.
 #[derive(Debug, Clone)]
@@ -43,24 +78,48 @@ pub struct JunctionSlot {
     pub branch: usize,
     /// The branch that ends at the junction (the others start there).
     pub is_parent: bool,
-    /// Unit direction from the centre into the branch, projected normal to the axis.
+    /// Unit direction from the centre into the branch: in a book, projected normal to the
+    /// spine; in sectors, as it leaves.
     pub direction: Vector3<f64>,
-    /// Angle of `direction` about the axis from the reference direction, radians in [0, 2 pi).
+    /// In a book, the angle of `direction` about the spine from the reference direction,
+    /// radians in [0, 2 pi); 0 in sectors.
     pub angle: f64,
     /// Branch radius near the junction, mm.
     pub radius: f64,
 }
 
-/// A half-plane hanging on the spine.
+/// A radial line from the junction's centre to its wall on which sectors meet.
 #[derive(Debug, Clone)]
-pub struct Page {
-    /// Unit direction in the page, normal to the spine.
+pub struct Spoke {
+    /// Unit direction from the centre.
     pub dir: Vector3<f64>,
-    pub angle: f64,
-    /// Distance from the centre to the lumen wall along `dir`, mm (the page's length scale).
+    /// Distance from the centre to the lumen wall along `dir`, mm.
     pub depth: f64,
-    /// Core cells across the page, from the spine to the rim.
-    pub cells: usize,
+    /// How many sectors meet on it (a book's spine ends: every branch's two; a page's middle:
+    /// two).
+    pub valence: usize,
+}
+
+/// How a junction's spokes are arranged.
+#[derive(Debug, Clone)]
+pub enum Arrangement {
+    /// Spokes 0 and 1 are the spine's ends (+axis, -axis), spoke 2 + i the middle of page i,
+    /// which lies between slot i and slot i + 1 (cyclically); slots counter-clockwise about
+    /// the axis.
+    Book {
+        /// Spine axis (unit).
+        axis: Vector3<f64>,
+        /// Angle origin about the axis (unit, normal to it): the parent's direction.
+        reference: Vector3<f64>,
+        /// Each page's angle about the axis from the reference, radians in [0, 2 pi).
+        page_angles: Vec<f64>,
+    },
+    /// Spokes from the branches' spherical Delaunay triangulation ([`layout`]).
+    Sectors {
+        /// Per slot, the slots it shares each of its fold's four sectors with (the sector
+        /// between its +x and +y spokes first, counter-clockwise on the template).
+        neighbours: Vec<[usize; 4]>,
+    },
 }
 
 /// The geometry of one junction.
@@ -69,19 +128,12 @@ pub struct JunctionGeometry {
     pub index: usize,
     pub centre: Point3<f64>,
     pub radius: f64,
-    /// Spine axis (unit).
-    pub axis: Vector3<f64>,
-    /// Angle origin about the axis (unit, normal to it): the parent's direction.
-    pub reference: Vector3<f64>,
-    /// Branches counter-clockwise about the axis.
+    pub arrangement: Arrangement,
+    /// The branches meeting here (in a book, counter-clockwise about the spine).
     pub slots: Vec<JunctionSlot>,
-    /// Page i lies between slot i and slot i + 1 (cyclically).
-    pub pages: Vec<Page>,
-    /// Distances from the centre to the wall along +axis and -axis, mm.
-    pub spine_up: f64,
-    pub spine_down: f64,
-    /// Core cells along the spine.
-    pub spine_cells: usize,
+    pub spokes: Vec<Spoke>,
+    /// Per slot, the spokes its fold lays the template's +x, +y, -x and -y half-axes on.
+    pub folds: Vec<[usize; 4]>,
     /// Scale of the folds' core about the centre (1 unless [`keep_fold_cores_inside`] shrank it).
     pub core_scale: f64,
 }
@@ -101,82 +153,114 @@ impl JunctionGeometry {
         self.slots.iter().position(|s| s.branch == branch).expect("branch belongs to the junction")
     }
 
-    /// Pages on the +x and -x sides of a slot's template. The template's x axis is the frame
-    /// normal = binormal x tangent = axis x tangent at the fold; a daughter's tangent leaves the
-    /// centre, so +x is the counter-clockwise page; the parent's arrives, so +x is clockwise.
-    pub fn side_pages(&self, slot: usize) -> (usize, usize) {
-        let k = self.slots.len();
-        let ccw = slot;
-        let cw = (slot + k - 1) % k;
-        if self.slots[slot].is_parent {
-            (cw, ccw)
-        } else {
-            (ccw, cw)
+    /// The spine's axis of a book, `None` for sectors.
+    pub fn spine_axis(&self) -> Option<Vector3<f64>> {
+        match &self.arrangement {
+            Arrangement::Book { axis, .. } => Some(*axis),
+            Arrangement::Sectors { .. } => None,
         }
     }
 
-    /// Unit bisector of a slot's wedge (between its two pages), pointing into the slot.
-    pub fn wedge_bisector(&self, slot: usize) -> Vector3<f64> {
-        let k = self.slots.len();
-        let (lo, hi) = (self.pages[(slot + k - 1) % k].angle, self.pages[slot].angle);
-        let width = (hi - lo).rem_euclid(TAU);
-        self.direction_at(lo + 0.5 * width)
+    /// The name of the arrangement, as report.json gives it.
+    pub fn arrangement_name(&self) -> &'static str {
+        match self.arrangement {
+            Arrangement::Book { .. } => "book",
+            Arrangement::Sectors { .. } => "sectors",
+        }
     }
 
-    fn direction_at(&self, angle: f64) -> Vector3<f64> {
-        let side = self.axis.cross(&self.reference);
-        self.reference * angle.cos() + side * angle.sin()
+    /// Unit direction into a slot's share of the junction (a book: the bisector of its wedge
+    /// between its two pages; sectors: its direction).
+    pub fn bisector(&self, slot: usize) -> Vector3<f64> {
+        match &self.arrangement {
+            Arrangement::Book { axis, reference, page_angles } => {
+                let k = self.slots.len();
+                let (lo, hi) = (page_angles[(slot + k - 1) % k], page_angles[slot]);
+                let width = (hi - lo).rem_euclid(TAU);
+                direction_about(axis, reference, lo + 0.5 * width)
+            }
+            Arrangement::Sectors { .. } => self.slots[slot].direction,
+        }
+    }
+
+    /// The spokes of a slot's fold a template point (turned to the fold) lies towards: the one
+    /// its x picks (+x or -x) and the one its y picks.
+    fn spokes_of(&self, slot: usize, p: &Vector2<f64>) -> (usize, usize) {
+        let f = &self.folds[slot];
+        (if p.x >= 0.0 { f[0] } else { f[2] }, if p.y >= 0.0 { f[1] } else { f[3] })
     }
 
     /// The folded end section of a slot: a template point (x, y), in radius units and already
-    /// turned by the branch's quarter turns, on its page. The spine cuts the template at
-    /// `cut` (x = 0 for a fold split down the middle).
-    pub fn fold(&self, slot: usize, p: &Vector2<f64>, cut: &SpineCut) -> Point3<f64> {
-        let x = cut.across(p.x);
-        let page = &self.pages[self.page_of(slot, x)];
-        let along = if p.y >= 0.0 { self.spine_up } else { self.spine_down };
+    /// turned by the branch's quarter turns, on its sector.
+    pub fn fold(&self, slot: usize, p: &Vector2<f64>, core_size: f64) -> Point3<f64> {
+        let (u, v) = self.spokes_of(slot, p);
+        let (u, v) = (&self.spokes[u], &self.spokes[v]);
         // The core scales (ray targets, beyond it, do not).
-        let in_core = x.abs().max(p.y.abs()) <= cut.core_size * (1.0 + 1e-12);
+        let in_core = p.x.abs().max(p.y.abs()) <= core_size * (1.0 + 1e-12);
         let scale = if in_core { self.core_scale } else { 1.0 };
-        self.centre + self.axis * (scale * p.y * along) + page.dir * (scale * x.abs() * page.depth)
+        self.centre + v.dir * (scale * p.y.abs() * v.depth) + u.dir * (scale * p.x.abs() * u.depth)
     }
 
-    /// The page of a slot's fold that a point lies on, from its signed distance `x` across the
-    /// fold from the spine ([`SpineCut::across`]): the +x page from the spine on.
-    fn page_of(&self, slot: usize, x: f64) -> usize {
-        let (right, left) = self.side_pages(slot);
-        if x >= 0.0 {
-            right
-        } else {
-            left
+    /// Angle between two slots' directions, radians in [0, pi] (in a book, about the spine).
+    pub fn angle_between(&self, a: usize, b: usize) -> f64 {
+        match &self.arrangement {
+            Arrangement::Book { .. } => {
+                let d = (self.slots[b].angle - self.slots[a].angle).rem_euclid(TAU);
+                d.min(TAU - d)
+            }
+            Arrangement::Sectors { .. } => self.slots[a].direction.angle(&self.slots[b].direction),
         }
     }
 
-    /// Angle between two slots' directions about the spine, radians in [0, pi].
-    pub fn angle_between(&self, a: usize, b: usize) -> f64 {
-        let d = (self.slots[b].angle - self.slots[a].angle).rem_euclid(TAU);
-        d.min(TAU - d)
+    /// The slots a slot shares a sector with (in a book, the two beside it about the spine).
+    pub fn neighbours(&self, slot: usize) -> Vec<usize> {
+        match &self.arrangement {
+            Arrangement::Book { .. } => {
+                let k = self.slots.len();
+                vec![(slot + 1) % k, (slot + k - 1) % k]
+            }
+            Arrangement::Sectors { neighbours } => {
+                let mut n = neighbours[slot].to_vec();
+                n.sort_unstable();
+                n.dedup();
+                n
+            }
+        }
+    }
+
+    /// The slots whose folds take a spoke.
+    pub fn slots_at(&self, spoke: usize) -> Vec<usize> {
+        (0..self.slots.len()).filter(|&s| self.folds[s].contains(&spoke)).collect()
+    }
+
+    /// Where a slot's fold meets the wall: its four spokes' wall points.
+    pub fn fold_wall(&self, slot: usize) -> [Point3<f64>; 4] {
+        self.folds[slot].map(|s| self.centre + self.spokes[s].dir * self.spokes[s].depth)
+    }
+
+    /// The spokes of a slot's fold that run to crotches between it and its neighbours: the +x
+    /// and -x ones (in a book its pages; the +y and -y ones are the spine's ends).
+    pub fn crotch_spokes(&self, slot: usize) -> [usize; 2] {
+        [self.folds[slot][0], self.folds[slot][2]]
     }
 
     /// Why a transition of this junction folds, measured, for the message that refuses an
     /// inverted hex in it: the branch's radius against the junction's and the angle to its
-    /// nearest neighbour about the spine. Every branch's folded end spans the whole spine, so a
-    /// small or acute branch funnels into it; on the synthetic sweep (tests/branching.rs) finer
-    /// meshes and thinner walls did not remove such folds.
+    /// nearest neighbour. A small branch's fold spans as much of the junction as a large one's
+    /// (in a book the whole spine), so a small or acute branch funnels into it; on the synthetic
+    /// sweep (tests/branching.rs) finer meshes and thinner walls did not remove such folds.
     pub fn fold_cause(&self, tree: &CenterlineTree, branch: usize) -> String {
-        let k = self.slots.len();
         let slot = self.slot_of(branch);
         let me = &self.slots[slot];
-        let nearest = [(slot + 1) % k, (slot + k - 1) % k]
-            .iter()
-            .map(|&o| self.angle_between(slot, o))
-            .fold(f64::INFINITY, f64::min);
+        let nearest = self.neighbours(slot).iter().map(|&o| self.angle_between(slot, o)).fold(f64::INFINITY, f64::min);
+        let spans = match self.arrangement {
+            Arrangement::Book { .. } => "the junction's whole spine",
+            Arrangement::Sectors { .. } => "four sectors reaching across the junction",
+        };
         format!(
             "the transition of {} folds there: its radius is {:.2} mm, 1/{:.1} of the junction's {:.2} mm, and it \
-             leaves {:.0} degrees from its nearest neighbour about the spine. Every branch's folded end spans the \
-             junction's whole spine, so a small or acute branch funnels into it; vesselhex does not yet give small \
-             side branches thin pages of their own (BRANCHING.md §4.3), and a finer mesh or a thinner wall seldom \
-             removes such a fold",
+             leaves {:.0} degrees from its nearest neighbour. Every branch's folded end spans {spans}, so a small or \
+             acute branch funnels into it, and a finer mesh or a thinner wall seldom removes such a fold",
             tree.branches[branch].name,
             me.radius,
             self.radius / me.radius,
@@ -185,10 +269,11 @@ impl JunctionGeometry {
         )
     }
 
-    /// Unit normal of a page, pointing to the side of the given slot.
-    fn page_normal_towards(&self, page: usize, slot: usize) -> Vector3<f64> {
-        let n = self.axis.cross(&self.pages[page].dir);
-        if n.dot(&self.wedge_bisector(slot)) >= 0.0 {
+    /// Unit normal of the sector between spokes `u` and `v`, pointing to the side of the given
+    /// slot.
+    fn sector_normal_towards(&self, u: usize, v: usize, slot: usize) -> Vector3<f64> {
+        let n = self.spokes[u].dir.cross(&self.spokes[v].dir);
+        if n.dot(&self.bisector(slot)) >= 0.0 {
             n
         } else {
             -n
@@ -196,16 +281,38 @@ impl JunctionGeometry {
     }
 
     /// Direction in which the transition curve of a template point arrives at the fold, seen
-    /// from the slot's side: along the wedge bisector at the spine, turning towards the page's
-    /// normal away from it so that hexes meet the page at a good angle.
-    pub fn arrival(&self, slot: usize, p: &Vector2<f64>, cut: &SpineCut) -> Vector3<f64> {
-        let x = cut.across(p.x);
-        let page = self.page_of(slot, x);
-        let w = -self.wedge_bisector(slot);
-        let n = -self.page_normal_towards(page, slot);
-        let beta = 0.5 * (x.abs() / cut.core_size).min(1.0);
+    /// from the slot's side: along the slot's bisector next to a spoke that three or more
+    /// sectors share (a book's spine), turning towards the sector's normal away from it so that
+    /// hexes meet the sector at a good angle.
+    pub fn arrival(&self, slot: usize, p: &Vector2<f64>, core_size: f64) -> Vector3<f64> {
+        let (u, v) = self.spokes_of(slot, p);
+        let w = -self.bisector(slot);
+        let n = -self.sector_normal_towards(u, v, slot);
+        // Distance from the shared spokes: |x| from the +y/-y one, |y| from the +x/-x one.
+        let shared = |s: usize| self.spokes[s].valence >= 3;
+        let from_shared = match (shared(v), shared(u)) {
+            (true, true) => p.x.abs().min(p.y.abs()),
+            (true, false) => p.x.abs(),
+            (false, true) => p.y.abs(),
+            (false, false) => core_size,
+        };
+        let beta = 0.5 * (from_shared / core_size).min(1.0);
         (w * (1.0 - beta) + n * beta).normalize()
     }
+
+    /// The frame normal a branch must have at its transition station for its template, turned
+    /// by q quarter turns, to lie on its fold: y towards the fold's +y spoke and away from its
+    /// -y one (in a book, along the spine), x = y x tangent.
+    pub fn fold_normal(&self, slot: usize, tangent: &Vector3<f64>, q: u8) -> Vector3<f64> {
+        let f = &self.folds[slot];
+        fold_normal(&(self.spokes[f[1]].dir - self.spokes[f[3]].dir), tangent, q)
+    }
+}
+
+/// The unit direction at `angle` about `axis` from `reference` (both unit, normal).
+fn direction_about(axis: &Vector3<f64>, reference: &Vector3<f64>, angle: f64) -> Vector3<f64> {
+    let side = axis.cross(reference);
+    reference * angle.cos() + side * angle.sin()
 }
 
 /// Signed angle from `from` to `to` about the unit `axis` (both normal to it), radians.
@@ -213,7 +320,13 @@ pub fn signed_angle(from: &Vector3<f64>, to: &Vector3<f64>, axis: &Vector3<f64>)
     from.cross(to).dot(axis).atan2(from.dot(to))
 }
 
-/// Distance from a point along a direction to the lumen wall, or an error naming the junction.
+/// A spoke that runs out of the vessel through an open end (between two branches leaving a few
+/// degrees apart, the ray finds no crotch before an end) reaches this many junction radii.
+const OPEN_SPOKE_REACH: f64 = 3.0;
+
+/// Distance from a point along a direction to the lumen wall; where the ray leaves through an
+/// open end from a centre inside the lumen, [`OPEN_SPOKE_REACH`] junction radii (`reach` is 20
+/// of them); an error naming the junction when the centre lies outside.
 fn wall_distance(
     surface: &LumenSurface,
     from: &Point3<f64>,
@@ -221,7 +334,11 @@ fn wall_distance(
     reach: f64,
     what: &dyn Fn() -> String,
 ) -> Result<f64> {
-    surface.first_hit(from, dir, reach).map(|h| h.distance).ok_or_else(|| {
+    let hit = surface.first_hit(from, dir, reach).map(|h| h.distance);
+    if hit.is_none() && surface.winding_number(from).abs() >= 0.5 {
+        return Ok(OPEN_SPOKE_REACH * reach / 20.0);
+    }
+    hit.ok_or_else(|| {
         Error::Geometry(format!(
             "{}: {}: a ray from the junction centre along ({:.3}, {:.3}, {:.3}) does not meet the lumen wall \
              within {:.2} mm; the junction centre may lie outside the lumen (check the centerlines)",
@@ -252,9 +369,15 @@ fn leaving_direction(branch: &Branch, from_end: bool, reach: f64) -> (Vector3<f6
     ((q.point - c).normalize(), q.radius)
 }
 
-/// Analyses every junction of the tree.
-pub fn analyse_junctions(tree: &CenterlineTree, surface: &LumenSurface) -> Result<Vec<JunctionGeometry>> {
-    tree.junctions.iter().enumerate().map(|(j, _)| analyse_junction(tree, j, surface)).collect()
+/// Analyses every junction of the tree: a book where one orders its branches; where none does,
+/// sectors if `policy` allows them (a bifurcation's book, else), or else a refusal naming the
+/// junction (recorded in the policy).
+pub fn analyse_junctions(
+    tree: &CenterlineTree,
+    surface: &LumenSurface,
+    policy: &LayoutPolicy,
+) -> Result<Vec<JunctionGeometry>> {
+    tree.junctions.iter().enumerate().map(|(j, _)| analyse_junction(tree, j, surface, policy)).collect()
 }
 
 /// A junction whose analysis fails (its branches cannot be ordered about any axis, say) though
@@ -264,7 +387,7 @@ pub fn analyse_junctions(tree: &CenterlineTree, surface: &LumenSurface) -> Resul
 /// are. The branch joining them (the shortest, if several) and the failure.
 pub fn unanalysable_close_junction(tree: &CenterlineTree, surface: &LumenSurface) -> Option<JunctionOverlap> {
     for (j, junction) in tree.junctions.iter().enumerate() {
-        let Err(error) = analyse_junction(tree, j, surface) else { continue };
+        let Err(error) = analyse_junction(tree, j, surface, &LayoutPolicy::books_only()) else { continue };
         let joining = tree
             .branches
             .iter()
@@ -314,8 +437,8 @@ fn axis_gap(dirs: &[Vector3<f64>], a: &Vector3<f64>) -> f64 {
     min_gap(&mut angles)
 }
 
-/// The spine's axis for branches leaving a junction along `dirs` (unit), and its smallest
-/// angular gap (radians): of the best-fit plane's normal and the normals of the planes of pairs
+/// The spine's axis for branches leaving a junction along `dirs` (unit), its smallest angular
+/// gap (radians) and whether it is acceptable: of the best-fit plane's normal and the normals of the planes of pairs
 /// of directions, the one that separates the projected directions best (the first of equals).
 /// Where that axis is not acceptable (a gap under [`MIN_ANGULAR_GAP_DEG`], or a branch within
 /// [`AXIS_CLEARANCE_DEG`] of it: it would fold onto pages that hold its own direction), the
@@ -326,7 +449,7 @@ fn axis_gap(dirs: &[Vector3<f64>], a: &Vector3<f64>) -> f64 {
 /// parent; the best of the planes' normals lay 19 degrees off the parent, whose fold's rays ran
 /// down it and out of the inlet at medium; about the mean, the gaps are 84 degrees or more and
 /// every branch stands 29 degrees off).
-fn spine_axis(dirs: &[Vector3<f64>]) -> (Vector3<f64>, f64) {
+fn spine_axis(dirs: &[Vector3<f64>]) -> (Vector3<f64>, f64, bool) {
     let mut scatter = Matrix3::zeros();
     for d in dirs {
         scatter += d * d.transpose();
@@ -355,29 +478,28 @@ fn spine_axis(dirs: &[Vector3<f64>]) -> (Vector3<f64>, f64) {
     };
     let best = best_of(&mut scored.iter()).expect("the best-fit plane's normal is a candidate");
     if acceptable(&best) {
-        return best;
+        return (best.0, best.1, true);
     }
     let mean: Vector3<f64> = dirs.iter().sum();
     let by_mean = (mean.norm() > 1e-6).then(|| (mean.normalize(), axis_gap(dirs, &mean.normalize())));
-    best_of(&mut scored.iter().filter(|s| acceptable(s))).or(by_mean.filter(acceptable)).unwrap_or(best)
+    match best_of(&mut scored.iter().filter(|s| acceptable(s))).or(by_mean.filter(acceptable)) {
+        Some((axis, gap)) => (axis, gap, true),
+        None => (best.0, best.1, false),
+    }
 }
 
-fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface) -> Result<JunctionGeometry> {
+fn analyse_junction(
+    tree: &CenterlineTree,
+    index: usize,
+    surface: &LumenSurface,
+    policy: &LayoutPolicy,
+) -> Result<JunctionGeometry> {
     let junction = &tree.junctions[index];
     let x = junction.centre;
     let r_x = junction.radius;
     let mut members: Vec<(usize, bool)> = vec![(junction.parent, true)];
     members.extend(junction.daughters.iter().map(|&d| (d, false)));
     let where_ = || format!("the junction at {}", describe_point(&x));
-    if members.len() > MAX_BRANCHES {
-        return Err(Error::Geometry(format!(
-            "{}: {} has {} branches; at most {MAX_BRANCHES} can share one junction. Split the centerlines so \
-             that branches leave at least one radius apart",
-            surface.source.display(),
-            where_(),
-            members.len()
-        )));
-    }
     let dirs: Vec<(Vector3<f64>, f64)> = members
         .iter()
         .map(|&(b, parent)| {
@@ -386,28 +508,64 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
             leaving_direction(br, parent, reach)
         })
         .collect();
-
     let directions: Vec<Vector3<f64>> = dirs.iter().map(|(d, _)| *d).collect();
-    let (mut axis, gap) = spine_axis(&directions);
-    // A deterministic sign: the largest component positive.
-    let imax = axis.iamax();
-    if axis[imax] < 0.0 {
-        axis = -axis;
+    let radii: Vec<f64> = dirs.iter().map(|(_, r)| *r).collect();
+    let (mut axis, gap, _) = spine_axis(&directions);
+    // Four or more branches may be laid out in sectors (three admit no other arrangement than
+    // the book).
+    let sectors = if members.len() >= 4 { layout::sector_layout(&directions, &radii) } else { None };
+    if sectors.is_some() && !policy.sectors {
+        policy.sectors_differ.set(true);
     }
-    if gap.to_degrees() < MIN_ANGULAR_GAP_DEG {
+    if let Some(sectors) = sectors.filter(|_| policy.sectors) {
+        return sectors_geometry(index, x, r_x, &members, &directions, &radii, &sectors, surface, &where_);
+    }
+    if members.len() > MAX_BOOK_BRANCHES {
+        policy.sectors_differ.set(true);
+        return Err(Error::Geometry(format!(
+            "{}: {} has {} branches; at most {MAX_BOOK_BRANCHES} can share one book of pages",
+            surface.source.display(),
+            where_(),
+            members.len()
+        )));
+    }
+    // With sectors allowed, a book no sectors replace (a bifurcation's: there is no other
+    // arrangement of three branches) is meshed however narrow its pages, and the elements decide.
+    if gap.to_degrees() < MIN_ANGULAR_GAP_DEG && !policy.sectors {
+        policy.sectors_differ.set(true);
         return Err(Error::Geometry(format!(
             "{}: {}: the branches cannot be ordered around a common axis (the best axis leaves only {:.1} degrees \
-             between two branches, at least {MIN_ANGULAR_GAP_DEG} are needed): the junction is strongly non-planar. \
-             Check the centerlines there, or smooth them (centerline.smoothing_passes)",
+             between two branches, at least {MIN_ANGULAR_GAP_DEG} are needed): the junction is strongly non-planar",
             surface.source.display(),
             where_(),
             gap.to_degrees()
         )));
     }
+    // A deterministic sign: the largest component positive.
+    let imax = axis.iamax();
+    if axis[imax] < 0.0 {
+        axis = -axis;
+    }
+    book_geometry(index, x, r_x, &members, &dirs, axis, surface, &where_)
+}
+
+/// A junction laid out as a book about `axis`: its slots ordered about it, a page between each
+/// two, the spine's ends and the pages' middles measured to the wall.
+#[allow(clippy::too_many_arguments)]
+fn book_geometry(
+    index: usize,
+    x: Point3<f64>,
+    r_x: f64,
+    members: &[(usize, bool)],
+    dirs: &[(Vector3<f64>, f64)],
+    axis: Vector3<f64>,
+    surface: &LumenSurface,
+    where_: &dyn Fn() -> String,
+) -> Result<JunctionGeometry> {
     let reference = (dirs[0].0 - axis * dirs[0].0.dot(&axis)).normalize();
     let mut slots: Vec<JunctionSlot> = members
         .iter()
-        .zip(&dirs)
+        .zip(dirs)
         .map(|(&(branch, is_parent), (d, r))| {
             let p = (d - axis * d.dot(&axis)).normalize();
             JunctionSlot {
@@ -420,34 +578,101 @@ fn analyse_junction(tree: &CenterlineTree, index: usize, surface: &LumenSurface)
         })
         .collect();
     slots.sort_by(|a, b| a.angle.total_cmp(&b.angle));
-
     let k = slots.len();
-    let mut geometry = JunctionGeometry {
-        index,
-        centre: x,
-        radius: r_x,
-        axis,
-        reference,
-        slots,
-        pages: vec![],
-        spine_up: 0.0,
-        spine_down: 0.0,
-        spine_cells: 0,
-        core_scale: 1.0,
-    };
     let reach = 20.0 * r_x;
+    let up = wall_distance(surface, &x, &axis, reach, where_)?;
+    let down = wall_distance(surface, &x, &(-axis), reach, where_)?;
+    let mut spokes = vec![Spoke { dir: axis, depth: up, valence: k }, Spoke { dir: -axis, depth: down, valence: k }];
+    let mut page_angles = vec![];
     for i in 0..k {
-        let (a, b) = (&geometry.slots[i], &geometry.slots[(i + 1) % k]);
+        let (a, b) = (&slots[i], &slots[(i + 1) % k]);
         let width = (b.angle - a.angle).rem_euclid(TAU);
         let width = if width == 0.0 { TAU } else { width };
         let angle = a.angle + width * a.radius / (a.radius + b.radius);
-        let dir = geometry.direction_at(angle);
-        let depth = wall_distance(surface, &x, &dir, reach, &where_)?;
-        geometry.pages.push(Page { dir, angle: angle.rem_euclid(TAU), depth, cells: 0 });
+        let dir = direction_about(&axis, &reference, angle);
+        let depth = wall_distance(surface, &x, &dir, reach, where_)?;
+        spokes.push(Spoke { dir, depth, valence: 2 });
+        page_angles.push(angle.rem_euclid(TAU));
     }
-    geometry.spine_up = wall_distance(surface, &x, &axis, reach, &where_)?;
-    geometry.spine_down = wall_distance(surface, &x, &(-axis), reach, &where_)?;
-    Ok(geometry)
+    // Page i lies between slot i and slot i + 1. The template's x axis is the frame normal =
+    // binormal x tangent = axis x tangent at the fold; a daughter's tangent leaves the centre,
+    // so its +x is the counter-clockwise page; the parent's arrives, so its +x is clockwise.
+    let folds = (0..k)
+        .map(|s| {
+            let (ccw, cw) = (2 + s, 2 + (s + k - 1) % k);
+            let (right, left) = if slots[s].is_parent { (cw, ccw) } else { (ccw, cw) };
+            [right, 0, left, 1]
+        })
+        .collect();
+    Ok(JunctionGeometry {
+        index,
+        centre: x,
+        radius: r_x,
+        arrangement: Arrangement::Book { axis, reference, page_angles },
+        slots,
+        spokes,
+        folds,
+        core_scale: 1.0,
+    })
+}
+
+/// A junction laid out in sectors: each slot's fold takes its layout corners, ordered so that
+/// the template's axes turn counter-clockwise about the branch's tangent at the fold (a
+/// daughter's leaves the centre, the parent's arrives) and its +y and -y spokes are the pair
+/// further apart across the branch.
+#[allow(clippy::too_many_arguments)]
+fn sectors_geometry(
+    index: usize,
+    x: Point3<f64>,
+    r_x: f64,
+    members: &[(usize, bool)],
+    directions: &[Vector3<f64>],
+    radii: &[f64],
+    layout: &layout::Layout,
+    surface: &LumenSurface,
+    where_: &dyn Fn() -> String,
+) -> Result<JunctionGeometry> {
+    let reach = 20.0 * r_x;
+    let spokes = layout
+        .spokes
+        .iter()
+        .zip(&layout.valence)
+        .map(|(dir, &valence)| Ok(Spoke { dir: *dir, depth: wall_distance(surface, &x, dir, reach, where_)?, valence }))
+        .collect::<Result<Vec<Spoke>>>()?;
+    let mut folds = vec![];
+    let mut neighbours = vec![];
+    for (v, &(_, is_parent)) in members.iter().enumerate() {
+        let (c, n) = (layout.corners[v], layout.sector_neighbours[v]);
+        // Counter-clockwise about the tangent: as given for a daughter, reversed for the parent
+        // (sector i lies between corners i and i + 1 either way).
+        let (mut c, mut n) = if is_parent { ([c[0], c[3], c[2], c[1]], [n[3], n[2], n[1], n[0]]) } else { (c, n) };
+        let d = directions[v];
+        let across = |a: usize, b: usize| {
+            let w = spokes[a].dir - spokes[b].dir;
+            (w - d * w.dot(&d)).norm()
+        };
+        if across(c[0], c[2]) > across(c[1], c[3]) {
+            c.rotate_left(1);
+            n.rotate_left(1);
+        }
+        folds.push(c);
+        neighbours.push(n);
+    }
+    let slots = members
+        .iter()
+        .zip(directions.iter().zip(radii))
+        .map(|(&(branch, is_parent), (d, r))| JunctionSlot { branch, is_parent, direction: *d, angle: 0.0, radius: *r })
+        .collect();
+    Ok(JunctionGeometry {
+        index,
+        centre: x,
+        radius: r_x,
+        arrangement: Arrangement::Sectors { neighbours },
+        slots,
+        spokes,
+        folds,
+        core_scale: 1.0,
+    })
 }
 
 /// Largest share of the way from a junction's centre to the wall that the boundary of a fold's
@@ -456,31 +681,34 @@ const FOLD_CORE_REACH: f64 = 0.8;
 /// Points sampled along each side of a page's half of the core's boundary.
 const FOLD_CORE_SAMPLES: usize = 8;
 
-/// Shrinks a junction's fold core (all its pages' and the spine's core nodes, about the centre)
+/// Shrinks a junction's fold core (all its sectors' and spokes' core nodes, about the centre)
 /// where its boundary would leave the lumen, until it lies within [`FOLD_CORE_REACH`] of the
-/// wall; a junction whose core lies inside keeps it as it is. The core is placed by the pages'
-/// depths and the spine's lengths, each measured in one direction from the centre: between
-/// them, where the lumen of a junction of many branches is not convex, a corner of the core
-/// can lie outside it, and its rays then miss the wall (sphinxsys_aortic_arch, where the
-/// brachiocephalic trunk and two arteries leave the arch within a radius of one another).
+/// wall; a junction whose core lies inside keeps it as it is. The core is placed by the spokes'
+/// depths, each measured in one direction from the centre: between them, where the lumen of a
+/// junction of many branches is not convex, a corner of the core can lie outside it, and its
+/// rays then miss the wall (sphinxsys_aortic_arch, where the brachiocephalic trunk and two
+/// arteries leave the arch within a radius of one another).
 pub fn keep_fold_cores_inside(junctions: &mut [JunctionGeometry], core_size: f64, surface: &LumenSurface) {
     for g in junctions.iter_mut() {
         let n = FOLD_CORE_SAMPLES;
         let side = |i: usize| core_size * i as f64 / n as f64;
-        // A page's half of the core's boundary: its rim (x = core_size) and its two ends along
-        // the spine (y = +-core_size).
+        // Half a fold's core boundary (x >= 0): its rim (x = core_size) and its two ends
+        // (y = +-core_size).
         let boundary: Vec<(f64, f64)> = (0..=2 * n)
             .map(|i| (core_size, side(i) - core_size))
             .chain((0..n).flat_map(|i| [(side(i), core_size), (side(i), -core_size)]))
             .collect();
         let mut scale: f64 = 1.0;
-        for page in &g.pages {
-            for &(x, y) in &boundary {
-                let along = if y >= 0.0 { g.spine_up } else { g.spine_down };
-                let offset = g.axis * (y * along) + page.dir * (x * page.depth);
-                let distance = offset.norm();
-                if let Some(hit) = surface.first_hit(&g.centre, &(offset / distance), distance) {
-                    scale = scale.min(FOLD_CORE_REACH * hit.distance / distance);
+        for fold in &g.folds {
+            for u in [fold[0], fold[2]] {
+                let u = &g.spokes[u];
+                for &(x, y) in &boundary {
+                    let v = &g.spokes[if y >= 0.0 { fold[1] } else { fold[3] }];
+                    let offset = v.dir * (y.abs() * v.depth) + u.dir * (x * u.depth);
+                    let distance = offset.norm();
+                    if let Some(hit) = surface.first_hit(&g.centre, &(offset / distance), distance) {
+                        scale = scale.min(FOLD_CORE_REACH * hit.distance / distance);
+                    }
                 }
             }
         }
@@ -530,15 +758,14 @@ pub fn find_junction_overlap(
             let chord = there.centre - here.centre;
             let apart = chord.norm();
             let slot = here.slot_of(b);
-            let (right, left) = here.side_pages(slot);
-            for page in [right, left] {
-                let p = &here.pages[page];
+            for spoke in here.crotch_spokes(slot) {
+                let p = &here.spokes[spoke];
                 let along = (p.dir * p.depth).dot(&chord) / apart;
                 if along <= apart {
                     continue;
                 }
-                let k = here.slots.len();
-                let name = |s: usize| tree.branches[here.slots[s % k].branch].name.as_str();
+                let beside: Vec<&str> =
+                    here.slots_at(spoke).iter().map(|&s| tree.branches[here.slots[s].branch].name.as_str()).collect();
                 let others: Vec<usize> = there.slots.iter().map(|s| s.branch).filter(|&o| o != b).collect();
                 let names: Vec<&str> = others.iter().map(|&o| tree.branches[o].name.as_str()).collect();
                 // The branch leaving from the crotch: the one whose tube passes nearest to it.
@@ -556,17 +783,15 @@ pub fn find_junction_overlap(
                     .expect("a junction has other branches")];
                 let outlet = culprit.samples.last().expect("branches have samples").point;
                 let error = Error::Geometry(format!(
-                    "{}: {} and {} overlap: the crotch between {} and {} lies {:.1} mm from the first junction's \
-                     centre along {}, past the second junction ({:.1} mm away, where {} meet). {} has no length \
-                     of its own on that side: {} (ending at {}) leaves from that crotch. Merged into one, such \
-                     junctions mesh; these could not be (they still overlap after merging, or too many pairs \
-                     do: pages of unequal depth would be needed, BRANCHING.md §4.3); with {} clipped from the \
-                     surface and the centerlines, the two junctions no longer meet",
+                    "{}: {} and {} overlap: the crotch between {} lies {:.1} mm from the first junction's centre \
+                     along {}, past the second junction ({:.1} mm away, where {} meet). {} has no length of its \
+                     own on that side: {} (ending at {}) leaves from that crotch. Merged into one, such junctions \
+                     mesh; these could not be (they still overlap after merging, or too many pairs do); with {} \
+                     clipped from the surface and the centerlines, the two junctions no longer meet",
                     surface.source.display(),
                     here.describe(tree),
                     there.describe(tree),
-                    name(page),
-                    name(page + 1),
+                    beside.join(" and "),
                     along,
                     branch.name,
                     apart,
@@ -582,65 +807,6 @@ pub fn find_junction_overlap(
         }
     }
     None
-}
-
-/// Gives every junction the default cell counts of an n x n core: n along the spine and n/2
-/// across each page, so every branch keeps the square core folded down its middle.
-pub fn equal_cells(junctions: &mut [JunctionGeometry], n: usize) {
-    for g in junctions {
-        g.spine_cells = n;
-        for page in &mut g.pages {
-            page.cells = n / 2;
-        }
-    }
-}
-
-/// The core grid (columns, rows) a slot's fold asks of its branch: the cells of its two pages
-/// across, the spine's along.
-pub fn fold_dims(geometry: &JunctionGeometry, slot: usize) -> (usize, usize) {
-    let (right, left) = geometry.side_pages(slot);
-    (geometry.pages[right].cells + geometry.pages[left].cells, geometry.spine_cells)
-}
-
-/// Each branch's core grid (nx, ny), from the cells of the junctions at its ends: a branch
-/// takes its first junction's fold dimensions (an unbranched vessel's, `n` x `n`); a branch
-/// between two junctions must find the same at the other (a square core in any turn, a
-/// rectangular one with its rows along both spines), or the junctions' cell counts cannot be
-/// joined along it.
-pub fn branch_core_dims(
-    tree: &CenterlineTree,
-    junctions: &[JunctionGeometry],
-    n: usize,
-    surface: &LumenSurface,
-) -> Result<Vec<(usize, usize)>> {
-    tree.branches
-        .iter()
-        .enumerate()
-        .map(|(b, branch)| {
-            let ends: Vec<&JunctionGeometry> =
-                [branch.start_junction, branch.end_junction].into_iter().flatten().map(|j| &junctions[j]).collect();
-            let Some(first) = ends.first() else { return Ok((n, n)) };
-            let dims = fold_dims(first, first.slot_of(b));
-            for other in &ends[1..] {
-                let there = fold_dims(other, other.slot_of(b));
-                if there != dims {
-                    return Err(Error::Geometry(format!(
-                        "{}: {} joins {} and {}, whose folds ask for core grids of {} x {} and {} x {} cells: \
-                         the junctions' page cells cannot be joined along it",
-                        surface.source.display(),
-                        branch.name,
-                        first.describe(tree),
-                        other.describe(tree),
-                        dims.0,
-                        dims.1,
-                        there.0,
-                        there.1
-                    )));
-                }
-            }
-            Ok(dims)
-        })
-        .collect()
 }
 
 /// Quarter turns of the template as index maps on its nx x ny core grid: turning by 90
@@ -691,66 +857,19 @@ pub struct FoldEnd {
     pub slot: usize,
     /// Quarter turns from the branch's template to the fold's.
     pub quarter_turns: u8,
-    /// The core grid column of the turned template that lies on the spine: the columns on
-    /// either side of it go to the two pages (the middle one today; a small branch's thin
-    /// pages, BRANCHING.md §4.3, are to move it).
-    pub split: usize,
 }
 
 impl FoldEnd {
-    /// The fold of a slot: the turned template's columns left of the spine go to the slot's
-    /// -x page, as many as that page has cells.
-    pub fn at(geometry: &JunctionGeometry, slot: usize, quarter_turns: u8, template: &SectionTemplate) -> FoldEnd {
-        let (right, left) = geometry.side_pages(slot);
-        let split = geometry.pages[left].cells;
-        debug_assert_eq!(
-            turned_dims(template.nx, template.ny, quarter_turns),
-            (split + geometry.pages[right].cells, geometry.spine_cells),
-            "the template fits the fold"
-        );
-        FoldEnd { junction: geometry.index, slot, quarter_turns, split }
-    }
-
-    /// Where the spine cuts the turned template.
-    pub fn spine_cut(&self, template: &SectionTemplate) -> SpineCut {
-        let columns = turned_dims(template.nx, template.ny, self.quarter_turns).0;
-        let a = template.core_size;
-        // Exactly 0 down the middle, whatever the rounding of the grid's x.
-        let x = if 2 * self.split == columns { 0.0 } else { -a + 2.0 * a * self.split as f64 / columns as f64 };
-        SpineCut { x, core_size: a }
-    }
-}
-
-/// Where the spine cuts a turned template (x, radius units) and the core's half-width.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SpineCut {
-    pub x: f64,
-    pub core_size: f64,
-}
-
-impl SpineCut {
-    /// Signed distance across the fold from the spine of a template x: the core on each side
-    /// of the cut is stretched to the core's half-width, so a page's core nodes lie where every
-    /// branch sharing that page puts them; from the core's edges outwards (ray targets) x is
-    /// kept.
-    pub fn across(&self, x: f64) -> f64 {
-        if self.x == 0.0 {
-            return x;
-        }
-        let d = x - self.x;
-        let side = if d >= 0.0 { self.core_size - self.x } else { self.core_size + self.x };
-        if d.abs() <= side {
-            d * self.core_size / side
-        } else {
-            d.signum() * (self.core_size + d.abs() - side)
-        }
+    pub fn at(geometry: &JunctionGeometry, slot: usize, quarter_turns: u8) -> FoldEnd {
+        FoldEnd { junction: geometry.index, slot, quarter_turns }
     }
 }
 
 /// The frame normal a branch must have at a junction's transition station for its template,
-/// turned by q quarter turns, to lie on the fold: x -> axis x tangent, y -> axis.
-pub fn fold_normal(axis: &Vector3<f64>, tangent: &Vector3<f64>, q: u8) -> Vector3<f64> {
-    let a = (axis - tangent * axis.dot(tangent)).normalize();
+/// turned by q quarter turns, to lie on a fold whose +y spoke lies along `up` from its -y one
+/// (a book's spine: x -> axis x tangent, y -> axis).
+pub fn fold_normal(up: &Vector3<f64>, tangent: &Vector3<f64>, q: u8) -> Vector3<f64> {
+    let a = (up - tangent * up.dot(tangent)).normalize();
     let x = a.cross(tangent);
     // Turning the template by q quarter turns counter-clockwise turns the normal the other way.
     let angle = -(q as f64) * 0.5 * PI;
@@ -778,10 +897,9 @@ pub fn twist_frames(branch: &mut Branch, s0: f64, start: f64, s1: f64, end: f64)
 /// T at 90 degrees: 0.124 -> 0.202, wall mean 0.85-0.88 -> 0.89-0.91), while a branch as wide as
 /// the junction keeps 1.5 radii.
 pub fn transition_length(geometry: &JunctionGeometry, slot: usize) -> f64 {
-    let k = geometry.slots.len();
     let me = &geometry.slots[slot];
     let mut length: f64 = geometry.radius + 0.5 * me.radius;
-    for other in [(slot + 1) % k, (slot + k - 1) % k] {
+    for other in geometry.neighbours(slot) {
         let o = &geometry.slots[other];
         let phi = geometry.angle_between(slot, other).clamp(0.2, PI);
         let clear = if phi < 0.5 * PI { me.radius.max(o.radius) * (1.0 + phi.cos()) / phi.sin() } else { 0.0 };
@@ -817,14 +935,14 @@ pub fn transition_points(
     towards_junction: &Vector3<f64>,
     params: &[f64],
 ) -> Vec<TransitionPoints> {
-    let cut = fold.spine_cut(template);
+    let a = template.core_size;
     let curve = |xy: &Vector2<f64>| {
         let p0 = template.place(station, xy);
         let turned = turn(fold.quarter_turns, xy);
-        let p1 = geometry.fold(fold.slot, &turned, &cut);
+        let p1 = geometry.fold(fold.slot, &turned, a);
         let chord = (p1 - p0).norm();
         let t0 = towards_junction * chord;
-        let t1 = geometry.arrival(fold.slot, &turned, &cut) * chord;
+        let t1 = geometry.arrival(fold.slot, &turned, a) * chord;
         (p0, t0, p1, t1)
     };
     let core_curves: Vec<_> = template.core.iter().map(curve).collect();
@@ -843,25 +961,28 @@ pub fn transition_points(
         .collect()
 }
 
-/// Key of a node of a folded end section, the same for the two branches sharing a page.
+/// Where a node of a folded end section lies, the same for every slot that places it: the
+/// centre, a spoke (at some core columns from the centre), or a sector between two spokes
+/// (the lower-numbered first, with the node's columns along each).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum FoldPlace {
+    Centre,
+    Spoke { spoke: u32, along: u32 },
+    Sector { first: u32, second: u32, along_first: u32, along_second: u32 },
+}
+
+/// Key of a node of a folded end section, the same for the slots sharing it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct FoldKey {
     pub junction: u32,
-    /// Page index, or u32::MAX on the spine.
-    pub page: u32,
-    /// Core grid columns from the spine.
-    pub from_spine: u32,
-    /// Core grid row (along the axis).
-    pub row: u32,
+    pub place: FoldPlace,
     /// 0: the core node; 1..: ring levels (lumen, then wall) of the ray that starts there.
     pub level: u32,
 }
 
 impl FoldKey {
-    pub const SPINE: u32 = u32::MAX;
-
     /// The key of core grid node (i, j) of a slot's template (before turning) at ring level.
-    /// Folds split the core down its middle column, so the template is square.
+    /// Folds split the square core along its middle row and column.
     pub fn new(
         geometry: &JunctionGeometry,
         fold: &FoldEnd,
@@ -871,20 +992,19 @@ impl FoldKey {
         level: usize,
     ) -> FoldKey {
         let (ti, tj) = turn_core_index(template.nx, template.ny, fold.quarter_turns, i, j);
-        let half = fold.split;
-        let (right, left) = geometry.side_pages(fold.slot);
-        let page = match ti.cmp(&half) {
-            std::cmp::Ordering::Equal => FoldKey::SPINE,
-            std::cmp::Ordering::Greater => right as u32,
-            std::cmp::Ordering::Less => left as u32,
+        let half = (template.nx / 2) as isize;
+        let (dx, dy) = (ti as isize - half, tj as isize - half);
+        let f = &geometry.folds[fold.slot];
+        let (u, v) = (if dx >= 0 { f[0] } else { f[2] } as u32, if dy >= 0 { f[1] } else { f[3] } as u32);
+        let (along_u, along_v) = (dx.unsigned_abs() as u32, dy.unsigned_abs() as u32);
+        let place = match (along_u, along_v) {
+            (0, 0) => FoldPlace::Centre,
+            (0, along) => FoldPlace::Spoke { spoke: v, along },
+            (along, 0) => FoldPlace::Spoke { spoke: u, along },
+            _ if u < v => FoldPlace::Sector { first: u, second: v, along_first: along_u, along_second: along_v },
+            _ => FoldPlace::Sector { first: v, second: u, along_first: along_v, along_second: along_u },
         };
-        FoldKey {
-            junction: geometry.index as u32,
-            page,
-            from_spine: ti.abs_diff(half) as u32,
-            row: tj as u32,
-            level: level as u32,
-        }
+        FoldKey { junction: geometry.index as u32, place, level: level as u32 }
     }
 }
 
@@ -901,7 +1021,8 @@ mod tests {
     fn a_planar_junction_keeps_its_planes_normal_as_the_spine() {
         let at = |deg: f64| Vector3::new(deg.to_radians().cos(), deg.to_radians().sin(), 0.0);
         let dirs = [at(180.0), at(30.0), at(-30.0)];
-        let (axis, gap) = spine_axis(&dirs);
+        let (axis, gap, acceptable) = spine_axis(&dirs);
+        assert!(acceptable);
         assert!(axis.z.abs() > 1.0 - 1e-9, "axis {axis:?}");
         assert!((gap.to_degrees() - 60.0).abs() < 1e-6, "gap {}", gap.to_degrees());
     }
@@ -917,7 +1038,8 @@ mod tests {
         ];
         // The plane that fits best and the pairs' planes each leave a branch within 25 degrees
         // of their normal, or the branches closer than 25 degrees about it.
-        let (axis, gap) = spine_axis(&dirs);
+        let (axis, gap, acceptable) = spine_axis(&dirs);
+        assert!(acceptable);
         assert!(least_angle_to(&axis, &dirs) >= AXIS_CLEARANCE_DEG, "{}", least_angle_to(&axis, &dirs));
         assert!(gap.to_degrees() >= 80.0, "gap {}", gap.to_degrees());
         let mean: Vector3<f64> = dirs.iter().sum();
@@ -951,33 +1073,39 @@ mod tests {
         }
     }
 
-    /// A junction of three daughters-and-parent slots about the z axis, pages at 60, 180 and
-    /// 300 degrees of depths 2, 3 and 4.
+    /// A book of three slots about the z axis (the parent at 0 degrees, daughters at 120 and
+    /// 240), pages at 60, 180 and 300 degrees of depths 2, 3 and 4, the spine 2.5 up and 1.5
+    /// down.
     fn three_pages() -> JunctionGeometry {
+        let at = |deg: f64| Vector3::new(deg.to_radians().cos(), deg.to_radians().sin(), 0.0);
         let slot = |branch: usize, angle_deg: f64| JunctionSlot {
             branch,
             is_parent: branch == 0,
-            direction: Vector3::new(angle_deg.to_radians().cos(), angle_deg.to_radians().sin(), 0.0),
+            direction: at(angle_deg),
             angle: angle_deg.to_radians(),
             radius: 1.0,
         };
-        let page = |angle_deg: f64, depth: f64| Page {
-            dir: Vector3::new(angle_deg.to_radians().cos(), angle_deg.to_radians().sin(), 0.0),
-            angle: angle_deg.to_radians(),
-            depth,
-            cells: 0,
-        };
+        let spoke = |dir: Vector3<f64>, depth: f64, valence: usize| Spoke { dir, depth, valence };
+        let spokes = vec![
+            spoke(Vector3::z(), 2.5, 3),
+            spoke(-Vector3::z(), 1.5, 3),
+            spoke(at(60.0), 2.0, 2),
+            spoke(at(180.0), 3.0, 2),
+            spoke(at(300.0), 4.0, 2),
+        ];
         JunctionGeometry {
             index: 0,
             centre: Point3::origin(),
             radius: 2.0,
-            axis: Vector3::z(),
-            reference: Vector3::x(),
+            arrangement: Arrangement::Book {
+                axis: Vector3::z(),
+                reference: Vector3::x(),
+                page_angles: vec![60f64.to_radians(), 180f64.to_radians(), 300f64.to_radians()],
+            },
             slots: vec![slot(0, 0.0), slot(1, 120.0), slot(2, 240.0)],
-            pages: vec![page(60.0, 2.0), page(180.0, 3.0), page(300.0, 4.0)],
-            spine_up: 2.5,
-            spine_down: 1.5,
-            spine_cells: 8,
+            spokes,
+            // The parent's +x is its clockwise page (page 2), a daughter's its counter-clockwise one.
+            folds: vec![[4, 0, 2, 1], [3, 0, 2, 1], [4, 0, 3, 1]],
             core_scale: 1.0,
         }
     }
@@ -993,8 +1121,7 @@ mod tests {
         let surface = LumenSurface::new(&crate::testing::domed_tube_surface(2.0, 10.0, 2.0)).unwrap();
         let mut g = three_pages();
         g.centre = Point3::new(0.0, 0.0, 10.0);
-        g.pages.iter_mut().for_each(|p| p.depth = 2.0);
-        (g.spine_up, g.spine_down) = (2.0, 2.0);
+        g.spokes.iter_mut().for_each(|s| s.depth = 2.0);
         let mut wide = [g.clone()];
         keep_fold_cores_inside(&mut wide, 0.8, &surface);
         assert!((wide[0].core_scale - 0.5_f64.sqrt()).abs() < 0.01, "scale {}", wide[0].core_scale);
@@ -1002,88 +1129,75 @@ mod tests {
         keep_fold_cores_inside(&mut narrow, 0.6, &surface);
         assert_eq!(narrow[0].core_scale, 1.0);
 
-        let cut = SpineCut { x: 0.0, core_size: 0.8 };
         let (corner, target) = (Vector2::new(0.8, 0.8), Vector2::new(1.6, 1.6));
-        let out = |g: &JunctionGeometry, p: &Vector2<f64>| g.fold(1, p, &cut) - g.centre;
+        let out = |g: &JunctionGeometry, p: &Vector2<f64>| g.fold(1, p, 0.8) - g.centre;
         let s = wide[0].core_scale;
         assert!((out(&wide[0], &corner) - out(&g, &corner) * s).norm() < 1e-12, "the core scales");
         assert!((out(&wide[0], &target) - out(&g, &target)).norm() < 1e-12, "the targets stay");
         assert!(out(&wide[0], &corner).norm() < 0.81 * 2.0, "the corner lies inside the dome");
     }
 
-    /// A fold split down the middle keeps every template x as it is (to the bit); an
-    /// off-centre split puts its column on the spine and each side's core edge at the core's
-    /// half-width.
-    #[test]
-    fn spine_cut_measures_across_from_the_split() {
-        let square = SectionTemplate::new(8, 0.5, 2.0);
-        for q in 0..4u8 {
-            let cut = FoldEnd { junction: 0, slot: 1, quarter_turns: q, split: 4 }.spine_cut(&square);
-            for p in &square.core {
-                assert_eq!(cut.across(p.x).to_bits(), p.x.to_bits());
+    /// Every slot that places a node of a fold places it at the same point under the same key,
+    /// and every sector node is placed by exactly the two slots sharing its sector.
+    fn assert_folds_agree(g: &JunctionGeometry) {
+        let template = SectionTemplate::new(8, 0.5, 2.0);
+        let mut placed: std::collections::HashMap<FoldKey, Vec<(usize, Point3<f64>)>> = Default::default();
+        for slot in 0..g.slots.len() {
+            for q in [0u8, 1] {
+                let fold = FoldEnd::at(g, slot, q);
+                for j in 0..=8 {
+                    for i in 0..=8 {
+                        let key = FoldKey::new(g, &fold, &template, i, j, 0);
+                        let p = g.fold(slot, &turn(q, &template.core[j * 9 + i]), 0.5);
+                        let seen = placed.entry(key).or_default();
+                        if let Some(&(_, first)) = seen.first() {
+                            assert!((p - first).norm() < 1e-12, "{key:?}: {p} vs {first}");
+                        }
+                        if q == 0 {
+                            seen.push((slot, p));
+                        }
+                    }
+                }
             }
         }
-        let off = FoldEnd { junction: 0, slot: 1, quarter_turns: 0, split: 6 }.spine_cut(&square);
-        let x = |i: usize| square.core[i].x;
-        assert!(off.across(x(6)).abs() < 1e-15, "the split column is on the spine");
-        assert!((off.across(x(8)) - 0.5).abs() < 1e-15 && (off.across(x(0)) + 0.5).abs() < 1e-15);
-        assert!((off.across(x(7)) - 0.25).abs() < 1e-15, "two columns share the right half-width");
-        assert!((off.across(x(3)) + 0.25).abs() < 1e-15, "six columns share the left half-width");
-        for x in [1.5, -1.5, 0.5, -0.5] {
-            assert!((off.across(x) - x).abs() < 1e-15, "from the core's edges outwards, x is kept: {x}");
+        for (key, by) in &placed {
+            if let FoldPlace::Sector { .. } = key.place {
+                let mut slots: Vec<usize> = by.iter().map(|b| b.0).collect();
+                slots.dedup();
+                assert_eq!(slots.len(), 2, "sector node {key:?} placed by {slots:?}");
+            }
         }
     }
 
-    /// A large branch split two columns from its right edge and a small 4-column branch split
-    /// down its middle share a two-column page: both give its core nodes the same keys and
-    /// the same points.
     #[test]
-    fn unequal_splits_agree_on_a_shared_page() {
+    fn a_books_pages_are_shared_by_the_slots_beside_them() {
         let g = three_pages();
-        let large = SectionTemplate::new(8, 0.5, 2.0);
-        let small = SectionTemplate::rect(4, 8, 0.5, 2.0);
-        let fold_large = FoldEnd { junction: 0, slot: 1, quarter_turns: 0, split: 6 };
-        let fold_small = FoldEnd { junction: 0, slot: 2, quarter_turns: 0, split: 2 };
-        assert_eq!(g.side_pages(1).0, g.side_pages(2).1, "slot 1's right page is slot 2's left");
-        let (cut_large, cut_small) = (fold_large.spine_cut(&large), fold_small.spine_cut(&small));
-        for j in 0..=8 {
-            for from_spine in 0..=2 {
-                let (il, is) = (6 + from_spine, 2 - from_spine);
-                let kl = FoldKey::new(&g, &fold_large, &large, il, j, 0);
-                let ks = FoldKey::new(&g, &fold_small, &small, is, j, 0);
-                assert_eq!(kl, ks, "row {j}, {from_spine} from the spine");
-                let pl = g.fold(1, &large.core[j * 9 + il], &cut_large);
-                let ps = g.fold(2, &small.core[j * 5 + is], &cut_small);
-                assert!((pl - ps).norm() < 1e-12, "row {j}, {from_spine} from the spine: {pl} vs {ps}");
-            }
-        }
+        assert_folds_agree(&g);
+        // The spine's core nodes are every slot's, a page's two slots'.
+        assert_eq!(g.slots_at(0), vec![0, 1, 2]);
+        assert_eq!(g.slots_at(2), vec![0, 1], "page 0 lies between slots 0 and 1");
     }
 
-    /// Equal cells give every slot the square n x n fold split down its middle; thin pages
-    /// beside a slot give it a rectangular core and move its neighbours' splits.
+    /// Six branches along the axes, laid out in sectors about the cube's corners (no spine).
     #[test]
-    fn page_cells_set_the_folds() {
-        let mut g = three_pages();
-        equal_cells(std::slice::from_mut(&mut g), 8);
-        let square = SectionTemplate::new(8, 0.5, 2.0);
-        for slot in 0..3 {
-            assert_eq!(fold_dims(&g, slot), (8, 8));
-            for q in 0..4u8 {
-                assert_eq!(FoldEnd::at(&g, slot, q, &square).split, 4);
-            }
+    fn sectors_of_six_branches_are_shared_by_the_slots_beside_them() {
+        let dirs = [-Vector3::z(), Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y(), Vector3::z()];
+        let layout = layout::sector_layout(&dirs, &[1.0; 6]).unwrap();
+        let surface = LumenSurface::new(&crate::testing::straight_tube_surface(3.0, 20.0, 48, 20)).unwrap();
+        let members: Vec<(usize, bool)> = (0..6).map(|b| (b, b == 0)).collect();
+        let centre = Point3::new(0.0, 0.0, 10.0);
+        let g = sectors_geometry(0, centre, 2.0, &members, &dirs, &[1.0; 6], &layout, &surface, &|| "x".into())
+            .unwrap();
+        assert_folds_agree(&g);
+        for slot in 0..6 {
+            // Counter-clockwise about the tangent (out of the centre for a daughter, into it
+            // for the parent).
+            let f = g.folds[slot];
+            let t = if slot == 0 { -dirs[0] } else { dirs[slot] };
+            let (x, y) = (g.spokes[f[0]].dir, g.spokes[f[1]].dir);
+            assert!(x.cross(&y).dot(&t) > 0.0, "slot {slot}: +x then +y turn counter-clockwise");
+            assert_eq!(g.neighbours(slot).len(), 4, "each face of a cube has four neighbours");
         }
-        // Slot 2 between two thin pages (pages 1 and 2), the page between slots 0 and 1 deep.
-        for (page, cells) in g.pages.iter_mut().zip([6, 2, 2]) {
-            page.cells = cells;
-        }
-        assert_eq!(fold_dims(&g, 2), (4, 8), "the small branch gets a 4 x 8 core");
-        assert_eq!(fold_dims(&g, 1), (8, 8));
-        assert_eq!(fold_dims(&g, 0), (8, 8));
-        let (right, left) = g.side_pages(1);
-        assert_eq!(FoldEnd::at(&g, 1, 0, &square).split, g.pages[left].cells);
-        assert_eq!(g.pages[right].cells + g.pages[left].cells, 8);
-        let small = SectionTemplate::rect(4, 8, 0.5, 2.0);
-        assert_eq!(FoldEnd::at(&g, 2, 2, &small).split, 2);
     }
 
     #[test]
