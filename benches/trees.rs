@@ -182,12 +182,32 @@ fn print_bins(rows: &[&Row]) {
     }
 }
 
-/// The failures of `rows` grouped by their cause with its numbers blanked.
+/// `text` with each number (sign, digits, decimal point) written `#`.
+fn numbers_blanked(text: &str) -> String {
+    let chars: Vec<char> = text.chars().collect();
+    let digit_at = |k: usize| chars.get(k).is_some_and(char::is_ascii_digit);
+    let (mut out, mut k) = (String::new(), 0);
+    while k < chars.len() {
+        if digit_at(k) || (chars[k] == '-' && digit_at(k + 1)) {
+            k += 1;
+            while digit_at(k) || (chars.get(k) == Some(&'.') && digit_at(k + 1)) {
+                k += 1;
+            }
+            out.push('#');
+        } else {
+            out.push(chars[k]);
+            k += 1;
+        }
+    }
+    out
+}
+
+/// The failures of `rows` grouped by the start of their cause with its numbers blanked.
 fn print_causes(rows: &[&Row]) {
     let mut groups: BTreeMap<String, Vec<(u64, &str)>> = BTreeMap::new();
     for r in rows {
         if let Some(cause) = &r.cause {
-            let key: String = shorten(cause, 90).chars().map(|c| if c.is_ascii_digit() { '#' } else { c }).collect();
+            let key = shorten(&numbers_blanked(cause), 60);
             groups.entry(key).or_default().push((r.seed, cause));
         }
     }
