@@ -13,7 +13,8 @@
 //! 6. [`pipeline`]: runs the stages in order, with the retry and fallback policies
 //!    ([`pipeline::policy`]), the report and the memory estimate;
 //! 7. on top: [`batch`] (many vessels, a process each), [`testing`] and the synthetic vessels
-//!    ([`synthetic`], [`synthetic_branching`]); the command line (`main.rs`) and the Python
+//!    ([`synthetic`], [`synthetic_branching`], the random trees of [`synthetic_tree`], all
+//!    triangulated by [`implicit_surface`]); the command line (`main.rs`) and the Python
 //!    package (`python/`) call the pipeline.
 pub mod batch;
 pub mod data;
@@ -21,8 +22,10 @@ pub mod geometry;
 pub mod io;
 pub mod pipeline;
 pub mod stages;
+pub mod implicit_surface;
 pub mod synthetic;
 pub mod synthetic_branching;
+pub mod synthetic_tree;
 pub mod testing;
 pub mod writers;
 

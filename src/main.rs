@@ -28,12 +28,9 @@ enum Command {
     /// with MaximumInscribedSphereRadius and CenterlineIds (VMTK-compatible .vtp, in --units).
     Centerlines(CenterlinesArgs),
     /// Write the synthetic test vessels into a folder: the unbranched ones (STL + CSV centerline)
-    /// and the branching ones (STL + VTP centerlines).
-    Fixtures {
-        /// Folder to write into.
-        #[arg(long)]
-        output: PathBuf,
-    },
+    /// and the branching ones (STL + VTP centerlines); with --random-tree, random vessel trees
+    /// with their truth instead.
+    Fixtures(FixturesArgs),
     /// Mesh every case of a manifest (CSV or JSON), N at a time, each in a process of its own,
     /// with a summary table (summary.csv, summary.json).
     #[command(long_about = vesselhex::batch::command::BATCH_HELP)]
@@ -41,6 +38,75 @@ enum Command {
     /// One case of `vesselhex batch`, handed over on standard input (run by the batch itself).
     #[command(hide = true)]
     BatchCase,
+}
+
+#[derive(Args)]
+struct FixturesArgs {
+    /// Folder to write into (created if needed).
+    #[arg(long)]
+    output: PathBuf,
+    /// Write the random tree of this seed, or of every seed of a range FIRST-LAST, instead of
+    /// the bundled fixtures: tree_SEED.stl (or .vtp), its manifest tree_SEED.json (every end,
+    /// vessel, junction, stenosis, aneurysm, hairpin and near pass, and the tree's bins) and
+    /// its centerlines tree_SEED_centerlines.vtp. The same seed gives the same bytes.
+    #[arg(long, value_name = "SEED", value_parser = parse_seeds)]
+    random_tree: Option<(u64, u64)>,
+    /// Format of a random tree's surface: stl (binary, f32) or vtp (f64) [default: stl].
+    #[arg(long, value_parser = ["stl", "vtp"], requires = "random_tree")]
+    format: Option<String>,
+    /// No progress display and no summary.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// Parses a seed or a range of seeds FIRST-LAST.
+fn parse_seeds(text: &str) -> Result<(u64, u64), String> {
+    let number = |t: &str| t.trim().parse::<u64>().map_err(|_| format!("'{text}' is not a seed (a whole number) or a range FIRST-LAST"));
+    match text.split_once('-') {
+        Some((a, b)) => {
+            let (a, b) = (number(a)?, number(b)?);
+            if a > b {
+                return Err(format!("the range {text} is empty: write FIRST-LAST with FIRST <= LAST"));
+            }
+            Ok((a, b))
+        }
+        None => number(text).map(|n| (n, n)),
+    }
+}
+
+/// `vesselhex fixtures`: the bundled fixtures, or random trees.
+fn fixtures(args: FixturesArgs) -> vesselhex::Result<()> {
+    use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
+    let Some((first, last)) = args.random_tree else {
+        vesselhex::synthetic::write_all_fixtures(&args.output)?;
+        vesselhex::synthetic_branching::write_all_branching_fixtures(&args.output)?;
+        return Ok(());
+    };
+    let format = if args.format.as_deref() == Some("vtp") { SurfaceFormat::Vtp } else { SurfaceFormat::Stl };
+    let mut progress = vesselhex::progress::Progress::new(args.quiet, 4 * (last - first + 1));
+    for seed in first..=last {
+        let written = write_random_tree(seed, &args.output, format, &mut progress)?;
+        if !args.quiet {
+            progress.suspend(|| {
+                let t = &written.tree;
+                let redrawn = if t.redrawn.is_empty() {
+                    String::new()
+                } else {
+                    format!(" (drawn {} times: {})", t.attempt + 1, t.redrawn.iter().map(|r| r.reason.as_str()).collect::<Vec<_>>().join("; "))
+                };
+                eprintln!(
+                    "vesselhex: random tree {seed}: {} ends, {} triangles{redrawn}; written to {}, {}, {}",
+                    t.ends.len(),
+                    t.surface.triangles.len(),
+                    written.surface.display(),
+                    written.manifest.display(),
+                    written.centerlines.display()
+                );
+            });
+        }
+    }
+    progress.finish();
+    Ok(())
 }
 
 const MESH_HELP: &str = "Mesh a vessel: lumen (core + four lateral blocks per cross-section, rays cast from the core \
@@ -398,9 +464,7 @@ fn main() -> ExitCode {
         Command::Centerlines(args) => centerlines(args).map(|_| MeshOutcome::Complete),
         Command::Batch(args) => return vesselhex::batch::command::run_command(args),
         Command::BatchCase => return vesselhex::batch::command::run_child(),
-        Command::Fixtures { output } => vesselhex::synthetic::write_all_fixtures(&output)
-            .and_then(|_| vesselhex::synthetic_branching::write_all_branching_fixtures(&output))
-            .map(|_| MeshOutcome::Complete),
+        Command::Fixtures(args) => fixtures(args).map(|_| MeshOutcome::Complete),
     };
     if let Some(signal) = vesselhex::output::interrupted_by() {
         eprintln!("vesselhex: {}", vesselhex::output::interruption(signal));

@@ -48,14 +48,19 @@
 
 use crate::data::error::{Error, Result};
 use crate::geometry::mesh::closest_on_segment;
+use crate::implicit_surface::{
+    check_surface, clip_open_end, compact, segment_distance, smooth_min, triangulate, EndCircle, ImplicitFunction,
+    SampledGrid, SurfaceStats, TriangulatedSurface,
+};
 use crate::io::input::{CenterlinePolyline, Centerlines};
 use crate::synthetic::write_binary_stl;
 use crate::writers::centerlines::write_vtp;
 use indexmap::IndexMap;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+
+pub use crate::implicit_surface::{min_angle_deg, MIN_ANGLE_DEG};
 
 /// How one end of a tube's axis is finished.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -119,6 +124,13 @@ pub struct Opening {
     pub separation: f64,
     /// Distance from the anchor to the end plane.
     pub length: f64,
+}
+
+impl Opening {
+    /// The end circle, open.
+    pub fn circle(&self) -> EndCircle {
+        EndCircle { centre: self.centre, outward: self.outward, radius: self.radius, capped: false, beyond: f64::INFINITY }
+    }
 }
 
 /// A branching vessel of analytic tubes; build it with [`YBifurcation::fixture`] or
@@ -397,68 +409,6 @@ fn check_range(what: &str, name: &str, value: f64, lo: f64, hi: f64) -> Result<(
 }
 
 // ---------------------------------------------------------------------------------------------
-// Geometry helpers
-// ---------------------------------------------------------------------------------------------
-
-/// Distance between segments [p0, p1] and [q0, q1]: the distance between the lines' closest
-/// points when both fall inside, else the smallest endpoint-to-segment distance (exact for
-/// segments, since the minimum is either interior to both or at an endpoint of one).
-fn segment_distance(p0: &Point3<f64>, p1: &Point3<f64>, q0: &Point3<f64>, q1: &Point3<f64>) -> f64 {
-    let mut best = [
-        (closest_on_segment(p0, q0, q1) - p0).norm(),
-        (closest_on_segment(p1, q0, q1) - p1).norm(),
-        (closest_on_segment(q0, p0, p1) - q0).norm(),
-        (closest_on_segment(q1, p0, p1) - q1).norm(),
-    ]
-    .into_iter()
-    .fold(f64::INFINITY, f64::min);
-    let (d1, d2, r) = (p1 - p0, q1 - q0, p0 - q0);
-    let (a, e, b, c, f) = (d1.dot(&d1), d2.dot(&d2), d1.dot(&d2), d1.dot(&r), d2.dot(&r));
-    let denom = a * e - b * b;
-    if denom > 1e-14 * a * e {
-        let s = (b * f - c * e) / denom;
-        let t = (a * f - b * c) / denom;
-        if (0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&t) {
-            best = best.min(((p0 + d1 * s) - (q0 + d2 * t)).norm());
-        }
-    }
-    best
-}
-
-/// Shape quality of a triangle, 4√3 area / Σ edge² (1 for equilateral, 0 for degenerate).
-fn triangle_quality(a: &Point3<f64>, b: &Point3<f64>, c: &Point3<f64>) -> f64 {
-    let twice_area = (b - a).cross(&(c - a)).norm();
-    let sum = (b - a).norm_squared() + (c - b).norm_squared() + (a - c).norm_squared();
-    if sum > 0.0 {
-        2.0 * 3f64.sqrt() * twice_area / sum
-    } else {
-        0.0
-    }
-}
-
-/// Smallest angle of a triangle, degrees.
-pub fn min_angle_deg(a: &Point3<f64>, b: &Point3<f64>, c: &Point3<f64>) -> f64 {
-    let angle = |p: &Point3<f64>, q: &Point3<f64>, r: &Point3<f64>| {
-        let (u, v) = (q - p, r - p);
-        u.cross(&v).norm().atan2(u.dot(&v)).to_degrees()
-    };
-    angle(a, b, c).min(angle(b, c, a)).min(angle(c, a, b))
-}
-
-/// The two triangles of quad `q` (in order) split along the diagonal that gives the better
-/// worse triangle; ties keep the 0-2 diagonal.
-fn split_quad(q: [u32; 4], vertices: &[Point3<f64>]) -> [[u32; 3]; 2] {
-    let p = q.map(|i| vertices[i as usize]);
-    let along_02 = triangle_quality(&p[0], &p[1], &p[2]).min(triangle_quality(&p[0], &p[2], &p[3]));
-    let along_13 = triangle_quality(&p[0], &p[1], &p[3]).min(triangle_quality(&p[1], &p[2], &p[3]));
-    if along_13 > along_02 {
-        [[q[0], q[1], q[3]], [q[1], q[2], q[3]]]
-    } else {
-        [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
 // The implicit lumen
 // ---------------------------------------------------------------------------------------------
 
@@ -487,17 +437,6 @@ impl Capsule {
     }
 }
 
-/// Cubic smooth minimum (C²) of two values with their gradients.
-fn smooth_min(a: (f64, Vector3<f64>), b: (f64, Vector3<f64>), k: f64) -> (f64, Vector3<f64>) {
-    let (lo, hi) = if a.0 <= b.0 { (a, b) } else { (b, a) };
-    let h = (k - (hi.0 - lo.0)).max(0.0) / k;
-    if h == 0.0 {
-        return lo;
-    }
-    let w = 0.5 * h * h;
-    (lo.0 - k * h * h * h / 6.0, lo.1 * (1.0 - w) + hi.1 * w)
-}
-
 /// The lumen's implicit function `F` (negative inside) with its gradient, and projections onto
 /// its zero level set.
 #[derive(Debug, Clone)]
@@ -507,9 +446,6 @@ pub struct LumenFunction {
     /// Length scale for the step cap of the Newton iterations (the grid cell).
     step_cap: f64,
 }
-
-/// Newton iterations allowed to land a point on `F = 0`.
-const NEWTON_ITERATIONS: usize = 100;
 
 impl LumenFunction {
     pub fn value_gradient(&self, p: &Point3<f64>) -> (f64, Vector3<f64>) {
@@ -524,98 +460,38 @@ impl LumenFunction {
         self.value_gradient(p).0
     }
 
-    /// First-order distance estimate `|F| / |∇F|` (exact on the surface to first order; used to
-    /// measure how far a vertex is from `F = 0`).
+    /// See [`ImplicitFunction::distance_estimate`].
     pub fn distance_estimate(&self, p: &Point3<f64>) -> f64 {
-        let (f, g) = self.value_gradient(p);
-        f.abs() / g.norm()
+        ImplicitFunction::distance_estimate(self, p)
     }
 
-    /// Moves `p` onto `F = 0` by Newton steps along the gradient (each capped at a grid cell),
-    /// until a step is below 1e-15 of the coordinates; `None` if that does not happen.
+    /// See [`ImplicitFunction::project`].
     pub fn project(&self, p: &Point3<f64>) -> Option<Point3<f64>> {
-        self.newton(p, None)
+        ImplicitFunction::project(self, p)
     }
 
-    /// Like [`LumenFunction::project`] but moving only within the plane through `origin` normal
-    /// to the unit vector `normal` (lands on the curve where the plane cuts the surface).
+    /// See [`ImplicitFunction::project_in_plane`].
     pub fn project_in_plane(
         &self,
         p: &Point3<f64>,
         origin: &Point3<f64>,
         normal: &Vector3<f64>,
     ) -> Option<Point3<f64>> {
-        let start = p - normal * (p - origin).dot(normal);
-        let x = self.newton(&start, Some(normal))?;
-        Some(x - normal * (x - origin).dot(normal))
+        ImplicitFunction::project_in_plane(self, p, origin, normal)
     }
 
-    fn newton(&self, p: &Point3<f64>, plane_normal: Option<&Vector3<f64>>) -> Option<Point3<f64>> {
-        let mut x = *p;
-        for _ in 0..NEWTON_ITERATIONS {
-            let (f, mut g) = self.value_gradient(&x);
-            if let Some(n) = plane_normal {
-                g -= n * g.dot(n);
-            }
-            let g2 = g.norm_squared();
-            if g2.is_nan() || g2 <= 1e-20 || !f.is_finite() {
-                return None;
-            }
-            // Converged when F is at its rounding level; where the gradient is weak (several
-            // tubes blending) the step itself never gets that small.
-            if f.abs() <= 1e-15 * (1.0 + x.coords.norm()) {
-                return Some(x);
-            }
-            let mut step = g * (f / g2);
-            let len = step.norm();
-            if len > self.step_cap {
-                step *= self.step_cap / len;
-            }
-            x -= step;
-            if len <= 1e-15 * (1.0 + x.coords.norm()) {
-                return Some(x);
-            }
-        }
-        None
-    }
-
-    /// The point of `F = 0` closest to `p`, found from `seed` (a surface point near it) by
-    /// moving along the tangent plane towards the foot of `p` (at most a grid cell at a time)
-    /// and projecting back onto the surface, accepting only moves that bring the point nearer
-    /// to `p` (halving the move otherwise), until a move is below 1e-13 of the coordinates.
+    /// See [`ImplicitFunction::closest_point`].
     pub fn closest_point(&self, p: &Point3<f64>, seed: &Point3<f64>) -> Option<Point3<f64>> {
-        let mut x = self.project(seed)?;
-        let mut scale: f64 = 1.0;
-        for _ in 0..2000 {
-            let n = self.value_gradient(&x).1.normalize();
-            let d = p - x;
-            let mut tangential = (d - n * d.dot(&n)) * scale;
-            let len = tangential.norm();
-            if len > self.step_cap {
-                tangential *= self.step_cap / len;
-            }
-            let tolerance = 1e-13 * (1.0 + x.coords.norm());
-            if tangential.norm() <= tolerance {
-                break;
-            }
-            match self.project(&(x + tangential)) {
-                Some(next) if (p - next).norm() <= (p - x).norm() + 1e-15 => {
-                    let moved = (next - x).norm();
-                    x = next;
-                    scale = (2.0 * scale).min(1.0);
-                    if moved <= tolerance {
-                        break;
-                    }
-                }
-                _ => {
-                    scale *= 0.5;
-                    if scale < 1e-12 {
-                        break;
-                    }
-                }
-            }
-        }
-        Some(x)
+        ImplicitFunction::closest_point(self, p, seed)
+    }
+}
+
+impl ImplicitFunction for LumenFunction {
+    fn value_gradient(&self, p: &Point3<f64>) -> (f64, Vector3<f64>) {
+        LumenFunction::value_gradient(self, p)
+    }
+    fn step_cap(&self) -> f64 {
+        self.step_cap
     }
 }
 
@@ -859,61 +735,13 @@ fn last_root_of_convex(g: impl Fn(f64) -> f64, reach: f64) -> f64 {
 // Triangulation
 // ---------------------------------------------------------------------------------------------
 
-/// Figures of a generated surface.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SurfaceStats {
-    /// Grid cells per axis of the surface-nets grid.
-    pub grid: [usize; 3],
-    /// Smallest angle of any triangle, degrees.
-    pub min_angle_deg: f64,
-    /// Shortest and longest edge, mm.
-    pub min_edge: f64,
-    pub max_edge: f64,
-    /// Largest `|F| / |∇F|` over the vertices, mm.
-    pub max_vertex_offset: f64,
-    /// Vertices slid onto an end plane, and vertices within a quarter cell of a plane that could
-    /// neither be slid onto it nor pushed away from it (their triangles are then cut close to
-    /// them; none in any fixture so far).
-    pub snapped: usize,
-    pub unsnapped: usize,
-}
-
 /// The triangulated lumen of a fixture: f64 vertices on `F = 0`, triangles wound outward (right-
 /// hand rule normals point out of the lumen), one open boundary loop per end.
-#[derive(Debug, Clone, PartialEq)]
-pub struct BranchingSurface {
-    pub vertices: Vec<Point3<f64>>,
-    pub triangles: Vec<[u32; 3]>,
-    pub stats: SurfaceStats,
-}
+pub type BranchingSurface = TriangulatedSurface;
 
-/// Surface nets on the fixture's grid: one vertex per cell that the surface crosses (the mean of
-/// the crossings of its edges, linearly interpolated), one outward quad per grid edge with a
-/// sign change (around the edge, counter-clockwise seen from the outside end of the edge).
-struct Grid {
-    origin: Point3<f64>,
-    h: f64,
-    cells: [usize; 3],
-    values: Vec<f64>,
-}
-
-impl Grid {
-    fn node_count(&self) -> [usize; 3] {
-        self.cells.map(|c| c + 1)
-    }
-    fn node_index(&self, i: usize, j: usize, k: usize) -> usize {
-        let n = self.node_count();
-        i + n[0] * (j + n[1] * k)
-    }
-    fn node_point(&self, i: usize, j: usize, k: usize) -> Point3<f64> {
-        self.origin + Vector3::new(i as f64, j as f64, k as f64) * self.h
-    }
-    fn cell_index(&self, i: usize, j: usize, k: usize) -> usize {
-        i + self.cells[0] * (j + self.cells[1] * k)
-    }
-}
-
-fn sample_grid(fixture: &BranchingFixture, f: &LumenFunction) -> Grid {
+/// The grid of a fixture: cells of `cell_size` over the capsules' bounding box padded by two
+/// cells, nodes at `(m + 1/2) h`, every node sampled.
+fn sample_grid(fixture: &BranchingFixture, f: &LumenFunction) -> SampledGrid {
     let h = fixture.cell_size;
     let mut lo = Point3::from([f64::INFINITY; 3]);
     let mut hi = Point3::from([f64::NEG_INFINITY; 3]);
@@ -932,166 +760,7 @@ fn sample_grid(fixture: &BranchingFixture, f: &LumenFunction) -> Grid {
     // tangentially and the blend leaves a lens thinner than a cell) fall half-way between nodes.
     let origin = lo.map(|x| ((x / h).floor() - 0.5) * h);
     let cells = [0, 1, 2].map(|k| ((hi[k] - origin[k]) / h).ceil() as usize);
-    let mut grid = Grid { origin, h, cells, values: Vec::new() };
-    let n = grid.node_count();
-    let total = n[0] * n[1] * n[2];
-    grid.values = (0..total)
-        .into_par_iter()
-        .map(|idx| {
-            let (i, j, k) = (idx % n[0], (idx / n[0]) % n[1], idx / (n[0] * n[1]));
-            f.value(&grid.node_point(i, j, k))
-        })
-        .collect();
-    grid
-}
-
-/// Cube corner `c` (bits x, y, z) as offsets.
-fn corner_offset(c: usize) -> (usize, usize, usize) {
-    (c & 1, (c >> 1) & 1, (c >> 2) & 1)
-}
-
-fn surface_nets(grid: &Grid) -> (Vec<Point3<f64>>, Vec<[u32; 4]>) {
-    let h = grid.h;
-    // Values at least a tenth of a cell away from zero, sign kept, so crossings stay a tenth of
-    // an edge away from the nodes (surface nets' short edges come from crossings at the nodes).
-    let floor = 0.1 * h;
-    let clamp = |v: f64| if v < 0.0 { v.min(-floor) } else { v.max(floor) };
-    let inside = |v: f64| v < 0.0;
-    let [cx, cy, cz] = grid.cells;
-    let mut cell_vertex = vec![u32::MAX; cx * cy * cz];
-    let mut positions = Vec::new();
-    for k in 0..cz {
-        for j in 0..cy {
-            for i in 0..cx {
-                let mut v = [0.0; 8];
-                let mut mask = 0u8;
-                for (c, value) in v.iter_mut().enumerate() {
-                    let (dx, dy, dz) = corner_offset(c);
-                    *value = grid.values[grid.node_index(i + dx, j + dy, k + dz)];
-                    if inside(*value) {
-                        mask |= 1 << c;
-                    }
-                }
-                if mask == 0 || mask == 255 {
-                    continue;
-                }
-                let mut sum = Vector3::zeros();
-                let mut count = 0.0;
-                for c in 0..8 {
-                    for bit in [1, 2, 4] {
-                        let d = c | bit;
-                        if c & bit != 0 || inside(v[c]) == inside(v[d]) {
-                            continue;
-                        }
-                        let (a, b) = (clamp(v[c]), clamp(v[d]));
-                        let t = a / (a - b);
-                        let (p, q) = (corner_offset(c), corner_offset(d));
-                        let pa = Vector3::new(p.0 as f64, p.1 as f64, p.2 as f64);
-                        let pb = Vector3::new(q.0 as f64, q.1 as f64, q.2 as f64);
-                        sum += pa + (pb - pa) * t;
-                        count += 1.0;
-                    }
-                }
-                cell_vertex[grid.cell_index(i, j, k)] = positions.len() as u32;
-                positions.push(grid.node_point(i, j, k) + sum * (h / count));
-            }
-        }
-    }
-    let n = grid.node_count();
-    let mut quads = Vec::new();
-    for k in 0..n[2] {
-        for j in 0..n[1] {
-            for i in 0..n[0] {
-                let node = [i, j, k];
-                let here = inside(grid.values[grid.node_index(i, j, k)]);
-                for d in 0..3 {
-                    let (u, w) = ((d + 1) % 3, (d + 2) % 3);
-                    if node[d] + 1 >= n[d]
-                        || node[u] == 0
-                        || node[w] == 0
-                        || node[u] >= grid.cells[u]
-                        || node[w] >= grid.cells[w]
-                    {
-                        continue;
-                    }
-                    let mut next = node;
-                    next[d] += 1;
-                    if inside(grid.values[grid.node_index(next[0], next[1], next[2])]) == here {
-                        continue;
-                    }
-                    let cell = |du: usize, dw: usize| {
-                        let mut c = node;
-                        c[u] -= du;
-                        c[w] -= dw;
-                        cell_vertex[grid.cell_index(c[0], c[1], c[2])]
-                    };
-                    // Counter-clockwise about +d: (-,-), (+,-), (+,+), (-,+) in (u, w).
-                    let quad = [cell(1, 1), cell(0, 1), cell(0, 0), cell(1, 0)];
-                    quads.push(if here { quad } else { [quad[3], quad[2], quad[1], quad[0]] });
-                }
-            }
-        }
-    }
-    (positions, quads)
-}
-
-/// Passes of [`relax_on_surface`] applied to the surface-nets vertices.
-const SMOOTHING_PASSES: usize = 3;
-
-/// One pass of tangential Laplacian relaxation over the quad mesh: each vertex moves half-way
-/// towards the mean of its quad-edge neighbours, within its tangent plane, then back onto
-/// `F = 0` (surface nets places vertices unevenly where the surface is oblique to the grid). A
-/// vertex whose projection fails keeps its place.
-fn relax_on_surface(f: &LumenFunction, vertices: &[Point3<f64>], quads: &[[u32; 4]]) -> Vec<Point3<f64>> {
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); vertices.len()];
-    for q in quads {
-        for e in 0..4 {
-            let (a, b) = (q[e], q[(e + 1) % 4]);
-            neighbours[a as usize].push(b);
-            neighbours[b as usize].push(a);
-        }
-    }
-    neighbours
-        .into_par_iter()
-        .enumerate()
-        .map(|(v, mut around)| {
-            let p = vertices[v];
-            around.sort_unstable();
-            around.dedup();
-            if around.is_empty() {
-                return p;
-            }
-            let mean = around.iter().map(|&u| vertices[u as usize].coords).sum::<Vector3<f64>>() / around.len() as f64;
-            let normal = f.value_gradient(&p).1.normalize();
-            let d = mean - p.coords;
-            f.project(&(p + (d - normal * d.dot(&normal)) * 0.5)).unwrap_or(p)
-        })
-        .collect()
-}
-
-/// Directed-edge map of a triangle list; `Err` with the first repeated directed edge (two
-/// triangles wound the same way along it, or a non-manifold edge).
-fn directed_edges(triangles: &[[u32; 3]]) -> std::result::Result<HashMap<(u32, u32), u32>, (u32, u32)> {
-    let mut map = HashMap::with_capacity(3 * triangles.len());
-    for (t, tri) in triangles.iter().enumerate() {
-        for e in 0..3 {
-            if map.insert((tri[e], tri[(e + 1) % 3]), t as u32).is_some() {
-                return Err((tri[e], tri[(e + 1) % 3]));
-            }
-        }
-    }
-    Ok(map)
-}
-
-/// For each vertex, the triangles that use it.
-fn incident_triangles(triangles: &[[u32; 3]], vertex_count: usize) -> Vec<Vec<u32>> {
-    let mut out = vec![Vec::new(); vertex_count];
-    for (t, tri) in triangles.iter().enumerate() {
-        for &v in tri {
-            out[v as usize].push(t as u32);
-        }
-    }
-    out
+    SampledGrid::sample_all(origin, h, cells, f)
 }
 
 impl BranchingFixture {
@@ -1099,40 +768,25 @@ impl BranchingFixture {
     pub fn generate_surface(&self) -> Result<BranchingSurface> {
         let f = self.lumen_function();
         let h = self.cell_size;
-        let grid = sample_grid(self, &f);
-        let (raw, quads) = surface_nets(&grid);
-        let projected: Vec<Option<Point3<f64>>> = raw.par_iter().map(|p| f.project(p)).collect();
-        let mut vertices = Vec::with_capacity(raw.len());
-        for (p, q) in raw.iter().zip(projected) {
-            vertices.push(q.ok_or_else(|| {
-                self.geometry_error(
-                    p,
-                    "a surface-nets vertex could not be moved onto the surface",
-                    "a smaller cell size",
-                )
-            })?);
-        }
-        for _ in 0..SMOOTHING_PASSES {
-            vertices = relax_on_surface(&f, &vertices, &quads);
-        }
-        let mut triangles: Vec<[u32; 3]> = quads.iter().flat_map(|q| split_quad(*q, &vertices)).collect();
-        // Before the cut the surface must be closed and manifold: surface nets joins two sheets
-        // that pass through one cell, which happens only where the grid is too coarse.
-        if let Err((a, _)) = directed_edges(&triangles) {
-            return Err(self.geometry_error(
-                &vertices[a as usize],
-                "two sheets of the surface pass through one grid cell (non-manifold edge)",
-                "a smaller cell size or a wider blend",
-            ));
-        }
-        let mut stats = SurfaceStats { grid: grid.cells, ..SurfaceStats::default() };
-        for o in self.openings() {
-            triangles = clip_open_end(&f, &o, h, &mut vertices, triangles, &mut stats)
-                .map_err(|(p, what)| self.geometry_error(&p, &what, "a smaller cell size"))?;
+        let mut grid = sample_grid(self, &f);
+        let (mut vertices, mut triangles, flipped) = triangulate(&f, &mut grid).map_err(|d| {
+            let fix = if d.what.contains("non-manifold") {
+                "a smaller cell size or a wider blend"
+            } else {
+                "a smaller cell size"
+            };
+            self.geometry_error(&d.at, &d.what, fix)
+        })?;
+        let mut stats = SurfaceStats { grid: grid.cells, flipped, ..SurfaceStats::default() };
+        let ends: Vec<EndCircle> = self.openings().iter().map(Opening::circle).collect();
+        for o in &ends {
+            triangles = clip_open_end(&f, o, h, &mut vertices, triangles, &mut stats)
+                .map_err(|d| self.geometry_error(&d.at, &d.what, "a smaller cell size"))?;
         }
         let (vertices, triangles) = compact(vertices, triangles);
         let mut surface = BranchingSurface { vertices, triangles, stats };
-        self.check_surface(&f, &mut surface)?;
+        check_surface(&f, &mut surface, &ends)
+            .map_err(|d| self.geometry_error(&d.at, &d.what, "a smaller cell size"))?;
         Ok(surface)
     }
 
@@ -1142,294 +796,6 @@ impl BranchingFixture {
             self.name, at.x, at.y, at.z, self.cell_size
         ))
     }
-
-    /// Manifold, one boundary loop per opening lying on its end circle, genus 0, outward and
-    /// non-degenerate triangles; fills the stats.
-    fn check_surface(&self, f: &LumenFunction, s: &mut BranchingSurface) -> Result<()> {
-        let openings = self.openings();
-        let edges = directed_edges(&s.triangles).map_err(|(a, _)| {
-            self.geometry_error(
-                &s.vertices[a as usize],
-                "an edge is shared by more than two triangles or mis-wound",
-                "a smaller cell size",
-            )
-        })?;
-        // Boundary edges: directed edges without their twin.
-        let mut next_on_boundary: HashMap<u32, u32> = HashMap::new();
-        let mut boundary_starts = Vec::new();
-        for &(a, b) in edges.keys() {
-            if !edges.contains_key(&(b, a)) {
-                if next_on_boundary.insert(a, b).is_some() {
-                    return Err(self.geometry_error(
-                        &s.vertices[a as usize],
-                        "a vertex is on two boundary loops",
-                        "a smaller cell size",
-                    ));
-                }
-                boundary_starts.push(a);
-            }
-        }
-        boundary_starts.sort_unstable();
-        let mut seen = std::collections::HashSet::new();
-        let mut loops_per_opening = vec![0usize; openings.len()];
-        for &start in &boundary_starts {
-            if !seen.insert(start) {
-                continue;
-            }
-            let mut v = start;
-            let mut members = vec![start];
-            loop {
-                v = next_on_boundary[&v];
-                if v == start {
-                    break;
-                }
-                seen.insert(v);
-                members.push(v);
-            }
-            let p = s.vertices[start as usize];
-            let which = openings.iter().position(|o| {
-                members.iter().all(|&m| {
-                    let q = s.vertices[m as usize];
-                    let scale = 1.0 + q.coords.norm();
-                    (q - o.centre).dot(&o.outward).abs() <= 1e-12 * scale
-                        && ((q - o.centre).norm() - o.radius).abs() <= 1e-12 * scale
-                })
-            });
-            match which {
-                Some(i) => loops_per_opening[i] += 1,
-                None => {
-                    return Err(self.geometry_error(
-                        &p,
-                        "a boundary loop is not an end circle (a hole in the surface)",
-                        "a smaller cell size",
-                    ))
-                }
-            }
-        }
-        if let Some(i) = loops_per_opening.iter().position(|&n| n != 1) {
-            let o = &openings[i];
-            return Err(self.geometry_error(
-                &o.centre,
-                &format!("the open end has {} boundary loops, not 1", loops_per_opening[i]),
-                "a smaller cell size",
-            ));
-        }
-        // Each vertex's triangles form one fan (no two surface sheets touching at a vertex).
-        let incident = incident_triangles(&s.triangles, s.vertices.len());
-        for (v, tris) in incident.iter().enumerate() {
-            let v = v as u32;
-            let mut link: HashMap<u32, u32> = HashMap::new();
-            for &t in tris {
-                let tri = s.triangles[t as usize];
-                let k = tri.iter().position(|&x| x == v).unwrap_or(0);
-                link.insert(tri[(k + 1) % 3], tri[(k + 2) % 3]);
-            }
-            let targets: std::collections::HashSet<u32> = link.values().copied().collect();
-            let mut start = *link.keys().min().unwrap_or(&0);
-            if let Some(&open) = link.keys().filter(|k| !targets.contains(k)).min() {
-                start = open;
-            }
-            let mut walked = 0;
-            let mut x = start;
-            while let Some(&y) = link.get(&x) {
-                walked += 1;
-                x = y;
-                if x == start || walked > link.len() {
-                    break;
-                }
-            }
-            if walked != link.len() {
-                return Err(self.geometry_error(
-                    &s.vertices[v as usize],
-                    "surface sheets touch at a vertex",
-                    "a smaller cell size",
-                ));
-            }
-        }
-        let euler = s.vertices.len() as i64 - (edges.len() as i64 + boundary_starts.len() as i64) / 2
-            + s.triangles.len() as i64;
-        if euler != 2 - openings.len() as i64 {
-            return Err(Error::Geometry(format!(
-                "synthetic fixture '{}': the surface has Euler characteristic {euler}, not {} (a handle or a separate \
-                 piece); try a smaller cell size",
-                self.name,
-                2 - openings.len() as i64
-            )));
-        }
-        let mut min_angle = f64::INFINITY;
-        let (mut min_edge, mut max_edge) = (f64::INFINITY, 0.0f64);
-        for tri in &s.triangles {
-            let [a, b, c] = tri.map(|i| s.vertices[i as usize]);
-            let normal = (b - a).cross(&(c - a));
-            let centroid = Point3::from((a.coords + b.coords + c.coords) / 3.0);
-            let outward = f.value_gradient(&centroid).1;
-            if normal.dot(&outward).is_nan() || normal.dot(&outward) <= 0.0 {
-                return Err(self.geometry_error(&centroid, "a triangle faces into the lumen", "a smaller cell size"));
-            }
-            min_angle = min_angle.min(min_angle_deg(&a, &b, &c));
-            for (p, q) in [(a, b), (b, c), (c, a)] {
-                let e = (q - p).norm();
-                min_edge = min_edge.min(e);
-                max_edge = max_edge.max(e);
-            }
-        }
-        if min_angle.is_nan() || min_angle < MIN_ANGLE_DEG {
-            return Err(Error::Geometry(format!(
-                "synthetic fixture '{}': a triangle has an angle of {min_angle:.2}° (below {MIN_ANGLE_DEG}°); try a \
-                 smaller cell size",
-                self.name
-            )));
-        }
-        s.stats.min_angle_deg = min_angle;
-        s.stats.min_edge = min_edge;
-        s.stats.max_edge = max_edge;
-        s.stats.max_vertex_offset = s.vertices.iter().map(|p| f.distance_estimate(p)).fold(0.0, f64::max);
-        Ok(())
-    }
-}
-
-/// Smallest triangle angle a generated surface may have.
-pub const MIN_ANGLE_DEG: f64 = 5.0;
-
-/// Cuts the surface at the end plane of `o`, keeping the lumen side. Only vertices in the clip
-/// zone (near the tube's axis line, from 3 cells before the plane on) are considered, so the
-/// (infinite) plane never touches another tube. Vertices within a quarter cell of the plane are
-/// slid along the axis onto it when that keeps their triangles well oriented and creates no
-/// triangle lying in the plane (else pushed a quarter cell away from it); the triangles crossing
-/// the plane are then split, new vertices landing on the end circle.
-fn clip_open_end(
-    f: &LumenFunction,
-    o: &Opening,
-    h: f64,
-    vertices: &mut Vec<Point3<f64>>,
-    triangles: Vec<[u32; 3]>,
-    stats: &mut SurfaceStats,
-) -> std::result::Result<Vec<[u32; 3]>, (Point3<f64>, String)> {
-    let n = o.outward;
-    let zone_radius = o.radius + 3.0 * h;
-    let offset = |p: &Point3<f64>| {
-        let w = p - o.centre;
-        let a = w.dot(&n);
-        if a > -3.0 * h && (w - n * a).norm() < zone_radius {
-            a
-        } else {
-            f64::NEG_INFINITY
-        }
-    };
-    let mut s: Vec<f64> = vertices.iter().map(offset).collect();
-    let mut on_plane = vec![false; vertices.len()];
-    let incident = incident_triangles(&triangles, vertices.len());
-    let delta = 0.25 * h;
-    // Whether moving vertex v to q keeps its triangles facing out (not folded over) and, if
-    // `onto_plane`, leaves none with all three corners on the plane.
-    let acceptable = |v: usize, q: &Point3<f64>, onto_plane: bool, vertices: &[Point3<f64>], on_plane: &[bool]| {
-        incident[v].iter().all(|&t| {
-            let tri = triangles[t as usize];
-            if onto_plane && tri.iter().all(|&x| x as usize == v || on_plane[x as usize]) {
-                return false;
-            }
-            let p = tri.map(|x| if x as usize == v { *q } else { vertices[x as usize] });
-            let normal = (p[1] - p[0]).cross(&(p[2] - p[0]));
-            let centroid = Point3::from((p[0].coords + p[1].coords + p[2].coords) / 3.0);
-            let outward = f.value_gradient(&centroid).1;
-            let len = normal.norm() * outward.norm();
-            len > 0.0 && normal.dot(&outward) > 0.2 * len && triangle_quality(&p[0], &p[1], &p[2]) > 0.05
-        })
-    };
-    for v in 0..vertices.len() {
-        if s[v].abs() >= delta {
-            continue;
-        }
-        let onto = f.project_in_plane(&(vertices[v] - n * s[v]), &o.centre, &n);
-        if let Some(q) = onto.filter(|q| acceptable(v, q, true, vertices, &on_plane)) {
-            vertices[v] = q;
-            s[v] = 0.0;
-            on_plane[v] = true;
-            stats.snapped += 1;
-            continue;
-        }
-        let away = f.project(&(vertices[v] + n * (delta.copysign(s[v]) - s[v])));
-        if let Some(q) = away.filter(|q| acceptable(v, q, false, vertices, &on_plane)) {
-            vertices[v] = q;
-            s[v] = offset(&q);
-        } else {
-            stats.unsnapped += 1;
-        }
-    }
-    // -1 lumen side, 0 on the plane, +1 beyond.
-    let side = |v: u32| {
-        if on_plane[v as usize] || s[v as usize] == 0.0 {
-            0
-        } else if s[v as usize] < 0.0 {
-            -1
-        } else {
-            1
-        }
-    };
-    let mut cut_points: HashMap<(u32, u32), u32> = HashMap::new();
-    let mut out = Vec::with_capacity(triangles.len());
-    for tri in &triangles {
-        let sides = tri.map(side);
-        if !sides.contains(&-1) {
-            continue;
-        }
-        if !sides.contains(&1) {
-            out.push(*tri);
-            continue;
-        }
-        // Sutherland-Hodgman against the plane, keeping the winding.
-        let mut polygon = Vec::with_capacity(4);
-        for e in 0..3 {
-            let (a, b) = (tri[e], tri[(e + 1) % 3]);
-            if sides[e] != 1 {
-                polygon.push(a);
-            }
-            if sides[e] * sides[(e + 1) % 3] == -1 {
-                let key = (a.min(b), a.max(b));
-                let id = match cut_points.get(&key) {
-                    Some(&id) => id,
-                    None => {
-                        let (pa, pb) = (vertices[key.0 as usize], vertices[key.1 as usize]);
-                        let (sa, sb) = (s[key.0 as usize], s[key.1 as usize]);
-                        let crossing = pa + (pb - pa) * (sa / (sa - sb));
-                        let q = f
-                            .project_in_plane(&crossing, &o.centre, &n)
-                            .ok_or((crossing, "a cut point could not be moved onto the end circle".to_string()))?;
-                        vertices.push(q);
-                        let id = (vertices.len() - 1) as u32;
-                        cut_points.insert(key, id);
-                        id
-                    }
-                };
-                polygon.push(id);
-            }
-        }
-        match polygon.len() {
-            3 => out.push([polygon[0], polygon[1], polygon[2]]),
-            4 => out.extend(split_quad([polygon[0], polygon[1], polygon[2], polygon[3]], vertices)),
-            _ => return Err((vertices[tri[0] as usize], "a triangle was cut into an odd shape".into())),
-        }
-    }
-    Ok(out)
-}
-
-/// Drops unused vertices, keeping the order of the others.
-fn compact(vertices: Vec<Point3<f64>>, triangles: Vec<[u32; 3]>) -> (Vec<Point3<f64>>, Vec<[u32; 3]>) {
-    let mut new_index = vec![u32::MAX; vertices.len()];
-    for tri in &triangles {
-        for &v in tri {
-            new_index[v as usize] = 0;
-        }
-    }
-    let mut kept = Vec::new();
-    for (i, p) in vertices.into_iter().enumerate() {
-        if new_index[i] == 0 {
-            new_index[i] = kept.len() as u32;
-            kept.push(p);
-        }
-    }
-    let triangles = triangles.into_iter().map(|t| t.map(|v| new_index[v as usize])).collect();
-    (kept, triangles)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1524,61 +890,6 @@ pub fn write_all_branching_fixtures(dir: &Path) -> Result<Vec<PathBuf>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn smooth_min_is_the_minimum_outside_the_band_and_its_gradient_is_consistent() {
-        let k = 0.5;
-        let (ga, gb) = (Vector3::x(), Vector3::y());
-        assert_eq!(smooth_min((1.0, ga), (1.6, gb), k), (1.0, ga));
-        assert_eq!(smooth_min((1.6, ga), (1.0, gb), k), (1.0, gb));
-        // At a = b the surface moves out by k / 6 and both gradients weigh one half.
-        let (v, g) = smooth_min((1.0, ga), (1.0, gb), k);
-        assert!((v - (1.0 - k / 6.0)).abs() < 1e-15 && (g - (ga + gb) * 0.5).norm() < 1e-15);
-        // d smin / da and d smin / db by central differences, across the band.
-        let h = 1e-6;
-        for i in 0..=40 {
-            let b = 1.0 - 0.6 + 1.2 * i as f64 / 40.0;
-            let (_, g) = smooth_min((1.0, ga), (b, gb), k);
-            let da = (smooth_min((1.0 + h, ga), (b, gb), k).0 - smooth_min((1.0 - h, ga), (b, gb), k).0) / (2.0 * h);
-            let db = (smooth_min((1.0, ga), (b + h, gb), k).0 - smooth_min((1.0, ga), (b - h, gb), k).0) / (2.0 * h);
-            assert!((g.x - da).abs() < 1e-8 && (g.y - db).abs() < 1e-8, "b = {b}: {g:?} vs {da}, {db}");
-        }
-    }
-
-    #[test]
-    fn segment_distance_matches_dense_sampling() {
-        let segments = [
-            (
-                Point3::new(0.0, 0.0, 0.0),
-                Point3::new(0.0, 0.0, 5.0),
-                Point3::new(1.0, -2.0, 2.0),
-                Point3::new(1.0, 2.0, 3.0),
-            ),
-            (
-                Point3::new(0.0, 0.0, 0.0),
-                Point3::new(1.0, 0.0, 0.0),
-                Point3::new(3.0, 1.0, 0.0),
-                Point3::new(5.0, 1.0, 0.0),
-            ),
-            (
-                Point3::new(0.0, 0.0, 0.0),
-                Point3::new(2.0, 0.0, 0.0),
-                Point3::new(0.0, 1.0, 0.0),
-                Point3::new(2.0, 1.0, 0.0),
-            ),
-        ];
-        for (p0, p1, q0, q1) in segments {
-            let n = 2000;
-            let brute = (0..=n)
-                .map(|i| {
-                    let p = p0 + (p1 - p0) * (i as f64 / n as f64);
-                    (closest_on_segment(&p, &q0, &q1) - p).norm()
-                })
-                .fold(f64::INFINITY, f64::min);
-            let d = segment_distance(&p0, &p1, &q0, &q1);
-            assert!(d <= brute + 1e-12 && brute - d < 1e-5, "{d} vs {brute}");
-        }
-    }
 
     #[test]
     fn last_root_of_a_convex_function() {

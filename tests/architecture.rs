@@ -25,7 +25,7 @@ const LAYERS: &[&[&str]] = &[
     &["stages"],
     &["writers"],
     &["pipeline"],
-    &["synthetic", "synthetic_branching", "testing", "batch"],
+    &["implicit_surface", "synthetic", "synthetic_branching", "synthetic_tree", "testing", "batch"],
 ];
 
 /// The stages under `src/stages/`, in the order data flows through them: a stage may import

@@ -54,6 +54,11 @@ impl Progress {
         }
     }
 
+    /// Runs `f` (which may print to standard error) with the bar hidden.
+    pub fn suspend<R>(&self, f: impl FnOnce() -> R) -> R {
+        self.bar.suspend(f)
+    }
+
     pub fn finish(&mut self) {
         self.finish_stage();
         self.bar.finish_and_clear();

@@ -140,18 +140,24 @@ pub fn verdict(run: &Run, reference: Option<&Run>, case: &CohortCase, written: &
         }
         None => {}
     }
+    if let Some(why) = bar_missed(run) {
+        return Some(why);
+    }
+    let names: Vec<&str> = run.ends.iter().filter_map(|e| e.name.as_deref()).collect();
+    let missing: Vec<&String> = written.end_names.iter().filter(|n| !names.contains(&n.as_str())).collect();
+    (!missing.is_empty()).then(|| format!("no end named {missing:?} (ends named {names:?})"))
+}
+
+/// The first bar the run's mesh misses (minimum scaled Jacobian, wall mean, lumen skew,
+/// interface), or nothing when it holds them all.
+pub fn bar_missed(run: &Run) -> Option<String> {
     let bars = [
         (run.min_sj >= MIN_SCALED_JACOBIAN, format!("min scaled Jacobian {:.3} < {MIN_SCALED_JACOBIAN}", run.min_sj)),
         (run.wall_mean >= MIN_WALL_MEAN, format!("wall mean {:.3} < {MIN_WALL_MEAN}", run.wall_mean)),
         (run.skew <= MAX_LUMEN_SKEW, format!("lumen skew {:.3} > {MAX_LUMEN_SKEW}", run.skew)),
         (run.interface_um < MAX_INTERFACE_UM, format!("interface {:.3} um off the surface", run.interface_um)),
     ];
-    if let Some((_, why)) = bars.into_iter().find(|b| !b.0) {
-        return Some(why);
-    }
-    let names: Vec<&str> = run.ends.iter().filter_map(|e| e.name.as_deref()).collect();
-    let missing: Vec<&String> = written.end_names.iter().filter(|n| !names.contains(&n.as_str())).collect();
-    (!missing.is_empty()).then(|| format!("no end named {missing:?} (ends named {names:?})"))
+    bars.into_iter().find(|b| !b.0).map(|(_, why)| why)
 }
 
 /// How the run's ends differ from the reference's: their number, an end of the reference with
@@ -195,7 +201,7 @@ pub fn stage_of(cause: &str) -> &'static str {
     }
 }
 
-fn shorten(text: &str, most: usize) -> String {
+pub fn shorten(text: &str, most: usize) -> String {
     match text.char_indices().nth(most) {
         Some((i, _)) => format!("{}...", &text[..i]),
         None => text.to_string(),

@@ -1,0 +1,278 @@
+//! The random-tree population (issue 46): `cargo bench --bench trees` writes each generated tree
+//! of a range of seeds ([`vesselhex::synthetic_tree`]), meshes it from the bare surface through
+//! `vesselhex mesh --surface tree_SEED.stl --units mm --preset P --quiet --reproducible` (a child
+//! process per tree and preset, two at a time, so a crash is one failed row) and compares the
+//! mesh with the tree's truth. A run passes when it exits 0, every true end is meshed (an end
+//! of report.json within the true end's radius of its centre, meshed) and every bar holds
+//! (minimum scaled Jacobian >= 0.2, wall mean >= 0.85, lumen mean equi-angle skew <= 0.35,
+//! interface sub-micron). It prints a row per run, then the pass rate by bin (branches at one
+//! place, out-of-plane angle, daughter spacing, radius ratio, stenosis, near pass), the
+//! failures grouped by cause and the meshing seconds per end.
+//!
+//! `VESSELHEX_TREE_SEEDS=FIRST-LAST` (default 1-200) or a comma-separated list;
+//! `VESSELHEX_TREE_PRESETS` (comma-separated, default coarse); `VESSELHEX_TREE_BIN=FILE`
+//! meshes with another build of `vesselhex`; `VESSELHEX_TREE_KEEP=DIR` writes the trees and
+//! meshes into DIR and keeps them.
+
+use nalgebra::Point3;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
+use vesselhex::progress::Progress;
+use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
+use vesselhex::testing::mutations::Written;
+use vesselhex::testing::suite::{bar_missed, mesh, shorten, Run};
+use vesselhex::units::LengthUnit;
+
+/// Runs at once (CI machines and the reference farm have 2 cores).
+const PARALLEL: usize = 2;
+
+/// The bins of the population table, as the manifest names them.
+const BINS: [(&str, &str); 6] = [
+    ("branches_at_one_place", "branches at one place"),
+    ("out_of_plane_deg", "out-of-plane angle (deg)"),
+    ("daughter_spacing_radii", "daughter spacing (parent radii)"),
+    ("radius_ratio", "radius ratio"),
+    ("stenosis_area_percent", "stenosis (area %)"),
+    ("near_pass_smaller_radii", "near pass (smaller radii)"),
+];
+
+/// One tree meshed at one preset.
+struct Row {
+    seed: u64,
+    preset: String,
+    run: Option<Run>,
+    true_ends: usize,
+    found: usize,
+    meshed: usize,
+    generation_seconds: f64,
+    bins: Vec<String>,
+    /// Why it fails; nothing when it passes.
+    cause: Option<String>,
+}
+
+/// The seeds `VESSELHEX_TREE_SEEDS` names: FIRST-LAST or a comma-separated list.
+fn seeds() -> Vec<u64> {
+    let text = std::env::var("VESSELHEX_TREE_SEEDS").unwrap_or_else(|_| "1-200".to_string());
+    let number = |t: &str| t.trim().parse::<u64>().unwrap_or_else(|_| panic!("VESSELHEX_TREE_SEEDS: '{t}' is not a seed"));
+    match text.split_once('-') {
+        Some((a, b)) => (number(a)..=number(b)).collect(),
+        None => text.split(',').map(number).collect(),
+    }
+}
+
+/// The true ends of a manifest: centre and radius (mm).
+fn true_ends(manifest: &serde_json::Value) -> Vec<(Point3<f64>, f64)> {
+    let ends = manifest["ends"].as_array().cloned().unwrap_or_default();
+    ends.iter()
+        .map(|e| {
+            let c = |k: usize| e["centre"][k].as_f64().unwrap_or(f64::NAN);
+            (Point3::new(c(0), c(1), c(2)), e["radius_mm"].as_f64().unwrap_or(f64::NAN))
+        })
+        .collect()
+}
+
+/// Judges a run against the truth: (ends found, found and meshed, the cause of a failure).
+fn judge(run: &Run, truth: &[(Point3<f64>, f64)]) -> (usize, usize, Option<String>) {
+    let (mut found, mut meshed, mut missing) = (0, 0, None);
+    for (k, (centre, radius)) in truth.iter().enumerate() {
+        let nearest = run.ends.iter().min_by(|a, b| (a.centre - centre).norm().total_cmp(&(b.centre - centre).norm()));
+        match nearest.filter(|e| (e.centre - centre).norm() <= *radius) {
+            Some(e) => {
+                found += 1;
+                meshed += usize::from(e.meshed);
+            }
+            None => {
+                let d = nearest.map_or(f64::INFINITY, |e| (e.centre - centre).norm());
+                missing.get_or_insert(format!(
+                    "true end {k} at ({:.2}, {:.2}, {:.2}) not found (nearest end {d:.2} mm, radius {radius:.2} mm)",
+                    centre.x, centre.y, centre.z
+                ));
+            }
+        }
+    }
+    let cause = if run.exit != Some(0) {
+        let code = run.exit.map_or("a signal".to_string(), |c| c.to_string());
+        Some(format!("exit {code}: {}", shorten(run.error.trim_start_matches("vesselhex: error: "), 200)))
+    } else if let Some(m) = missing {
+        Some(m)
+    } else if meshed < truth.len() || run.ends.iter().any(|e| !e.meshed) {
+        Some(format!("{meshed} of {} true ends meshed ({} ends in the report)", truth.len(), run.ends.len()))
+    } else {
+        bar_missed(run)
+    };
+    (found, meshed, cause)
+}
+
+/// Writes tree `seed` into `dir` and meshes it at every preset.
+fn run_seed(seed: u64, dir: &Path, binary: &Path, presets: &[String]) -> Vec<Row> {
+    let clock = Instant::now();
+    let written = write_random_tree(seed, &dir.join("input"), SurfaceFormat::Stl, &mut Progress::new(true, 0));
+    let generation_seconds = clock.elapsed().as_secs_f64();
+    let row = |preset: &str| Row {
+        seed,
+        preset: preset.to_string(),
+        run: None,
+        true_ends: 0,
+        found: 0,
+        meshed: 0,
+        generation_seconds,
+        bins: vec![String::new(); BINS.len()],
+        cause: None,
+    };
+    let written = match written {
+        Ok(w) => w,
+        Err(e) => {
+            return presets.iter().map(|p| Row { cause: Some(format!("generation: {e}")), ..row(p) }).collect();
+        }
+    };
+    let manifest = serde_json::to_value(written.tree.manifest("", "")).unwrap_or_default();
+    let truth = true_ends(&manifest);
+    let bins: Vec<String> = BINS.iter().map(|(k, _)| manifest["bins"][k].as_str().unwrap_or("?").to_string()).collect();
+    let input = Written { surface: written.surface, caps: vec![], unit: LengthUnit::Mm, rotation: None, end_names: vec![] };
+    presets
+        .iter()
+        .map(|preset| {
+            let run = mesh(binary, &input, &dir.join(preset), preset, &["--reproducible"]);
+            let (found, meshed, cause) = judge(&run, &truth);
+            // Messages name the surface by its path: the tree's folder is noise in the table.
+            let cause = cause.map(|c| c.replace(&format!("{}/", dir.join("input").display()), ""));
+            Row { run: Some(run), true_ends: truth.len(), found, meshed, bins: bins.clone(), cause, ..row(preset) }
+        })
+        .collect()
+}
+
+fn header() -> String {
+    format!(
+        "{:>5} {:<7} {:>4} {:>11} {:>7} {:>6} {:>6} {:>6} {:>5}  {:<48}  cause",
+        "seed", "preset", "exit", "ends t/f/m", "min SJ", "wall", "skew", "s", "gen s", "bins"
+    )
+}
+
+fn format_row(r: &Row) -> String {
+    let nan = f64::NAN;
+    let (exit, sj, wall, skew, s) = match &r.run {
+        Some(run) => (run.exit.map_or("-".to_string(), |c| c.to_string()), run.min_sj, run.wall_mean, run.skew, run.seconds),
+        None => ("-".to_string(), nan, nan, nan, 0.0),
+    };
+    format!(
+        "{:>5} {:<7} {exit:>4} {:>11} {sj:>7.3} {wall:>6.3} {skew:>6.3} {s:>6.1} {:>5.1}  {:<48}  {}",
+        r.seed,
+        r.preset,
+        format!("{}/{}/{}", r.true_ends, r.found, r.meshed),
+        r.generation_seconds,
+        r.bins.join(" "),
+        r.cause.as_deref().unwrap_or("pass")
+    )
+}
+
+/// The pass rate of `rows` by each bin's value.
+fn print_bins(rows: &[&Row]) {
+    for (k, (_, title)) in BINS.iter().enumerate() {
+        let mut by: BTreeMap<&str, (usize, usize)> = BTreeMap::new();
+        for r in rows {
+            let e = by.entry(r.bins[k].as_str()).or_default();
+            e.0 += usize::from(r.cause.is_none());
+            e.1 += 1;
+        }
+        let cells: Vec<String> = by.iter().map(|(v, (p, n))| format!("{v}: {p}/{n}")).collect();
+        println!("  {title:<32} {}", cells.join(", "));
+    }
+}
+
+/// `text` with each number (sign, digits, decimal point) written `#`.
+fn numbers_blanked(text: &str) -> String {
+    let chars: Vec<char> = text.chars().collect();
+    let digit_at = |k: usize| chars.get(k).is_some_and(char::is_ascii_digit);
+    let (mut out, mut k) = (String::new(), 0);
+    while k < chars.len() {
+        if digit_at(k) || (chars[k] == '-' && digit_at(k + 1)) {
+            k += 1;
+            while digit_at(k) || (chars.get(k) == Some(&'.') && digit_at(k + 1)) {
+                k += 1;
+            }
+            out.push('#');
+        } else {
+            out.push(chars[k]);
+            k += 1;
+        }
+    }
+    out
+}
+
+/// The failures of `rows` grouped by the start of their cause with its numbers blanked.
+fn print_causes(rows: &[&Row]) {
+    let mut groups: BTreeMap<String, Vec<(u64, &str)>> = BTreeMap::new();
+    for r in rows {
+        if let Some(cause) = &r.cause {
+            let key = shorten(&numbers_blanked(cause), 60);
+            groups.entry(key).or_default().push((r.seed, cause));
+        }
+    }
+    let mut groups: Vec<_> = groups.into_iter().collect();
+    groups.sort_by_key(|g| std::cmp::Reverse(g.1.len()));
+    for (key, members) in groups {
+        let seeds: Vec<String> = members.iter().map(|m| m.0.to_string()).collect();
+        println!("  {:>3} x {key}\n        seeds {}; e.g. {}", members.len(), seeds.join(", "), members[0].1);
+    }
+}
+
+fn main() {
+    let seeds = seeds();
+    let presets: Vec<String> = std::env::var("VESSELHEX_TREE_PRESETS")
+        .unwrap_or_else(|_| "coarse".to_string())
+        .split(',')
+        .map(|s| s.trim().to_string())
+        .collect();
+    let binary =
+        std::env::var_os("VESSELHEX_TREE_BIN").map_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_vesselhex")), PathBuf::from);
+    let scratch = tempfile::tempdir().expect("a temporary folder");
+    let keep = std::env::var_os("VESSELHEX_TREE_KEEP").map(PathBuf::from);
+    let root = keep.clone().unwrap_or_else(|| scratch.path().to_path_buf());
+    println!("{}", header());
+    let next = AtomicUsize::new(0);
+    let rows = Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..PARALLEL {
+            scope.spawn(|| {
+                while let Some(&seed) = seeds.get(next.fetch_add(1, Ordering::SeqCst)) {
+                    let dir = root.join(format!("tree_{seed}"));
+                    let done = run_seed(seed, &dir, &binary, &presets);
+                    if keep.is_none() {
+                        let _ = std::fs::remove_dir_all(&dir);
+                    }
+                    let mut rows = rows.lock().unwrap_or_else(|e| e.into_inner());
+                    for r in &done {
+                        println!("{}", format_row(r));
+                    }
+                    rows.extend(done);
+                }
+            });
+        }
+    });
+    let mut rows = rows.into_inner().unwrap_or_else(|e| e.into_inner());
+    rows.sort_by_key(|r| (presets.iter().position(|p| *p == r.preset), r.seed));
+    for preset in &presets {
+        let of: Vec<&Row> = rows.iter().filter(|r| &r.preset == preset).collect();
+        let passed = of.iter().filter(|r| r.cause.is_none()).count();
+        let ends: usize = of.iter().map(|r| r.true_ends).sum();
+        let seconds: f64 = of.iter().filter_map(|r| r.run.as_ref()).map(|r| r.seconds).sum();
+        let generation: f64 = of.iter().map(|r| r.generation_seconds).sum();
+        println!(
+            "\nrandom trees at {preset}, seeds {}..{}: {passed} of {} pass ({:.1} %); meshing {:.3} s per end \
+             ({seconds:.1} s for {ends} ends), generation {:.2} s per tree",
+            seeds.first().unwrap_or(&0),
+            seeds.last().unwrap_or(&0),
+            of.len(),
+            100.0 * passed as f64 / of.len().max(1) as f64,
+            seconds / ends.max(1) as f64,
+            generation / of.len().max(1) as f64,
+        );
+        println!("pass rate by bin:");
+        print_bins(&of);
+        println!("failures by cause:");
+        print_causes(&of);
+    }
+}
