@@ -56,7 +56,8 @@ struct Row {
 /// The seeds `VESSELHEX_TREE_SEEDS` names: FIRST-LAST or a comma-separated list.
 fn seeds() -> Vec<u64> {
     let text = std::env::var("VESSELHEX_TREE_SEEDS").unwrap_or_else(|_| "1-200".to_string());
-    let number = |t: &str| t.trim().parse::<u64>().unwrap_or_else(|_| panic!("VESSELHEX_TREE_SEEDS: '{t}' is not a seed"));
+    let number =
+        |t: &str| t.trim().parse::<u64>().unwrap_or_else(|_| panic!("VESSELHEX_TREE_SEEDS: '{t}' is not a seed"));
     match text.split_once('-') {
         Some((a, b)) => (number(a)..=number(b)).collect(),
         None => text.split(',').map(number).collect(),
@@ -131,7 +132,8 @@ fn run_seed(seed: u64, dir: &Path, binary: &Path, presets: &[String]) -> Vec<Row
     let manifest = serde_json::to_value(written.tree.manifest("", "")).unwrap_or_default();
     let truth = true_ends(&manifest);
     let bins: Vec<String> = BINS.iter().map(|(k, _)| manifest["bins"][k].as_str().unwrap_or("?").to_string()).collect();
-    let input = Written { surface: written.surface, caps: vec![], unit: LengthUnit::Mm, rotation: None, end_names: vec![] };
+    let input =
+        Written { surface: written.surface, caps: vec![], unit: LengthUnit::Mm, rotation: None, end_names: vec![] };
     presets
         .iter()
         .map(|preset| {
@@ -154,7 +156,9 @@ fn header() -> String {
 fn format_row(r: &Row) -> String {
     let nan = f64::NAN;
     let (exit, sj, wall, skew, s) = match &r.run {
-        Some(run) => (run.exit.map_or("-".to_string(), |c| c.to_string()), run.min_sj, run.wall_mean, run.skew, run.seconds),
+        Some(run) => {
+            (run.exit.map_or("-".to_string(), |c| c.to_string()), run.min_sj, run.wall_mean, run.skew, run.seconds)
+        }
         None => ("-".to_string(), nan, nan, nan, 0.0),
     };
     format!(
@@ -226,8 +230,8 @@ fn main() {
         .split(',')
         .map(|s| s.trim().to_string())
         .collect();
-    let binary =
-        std::env::var_os("VESSELHEX_TREE_BIN").map_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_vesselhex")), PathBuf::from);
+    let binary = std::env::var_os("VESSELHEX_TREE_BIN")
+        .map_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_vesselhex")), PathBuf::from);
     let scratch = tempfile::tempdir().expect("a temporary folder");
     let keep = std::env::var_os("VESSELHEX_TREE_KEEP").map(PathBuf::from);
     let root = keep.clone().unwrap_or_else(|| scratch.path().to_path_buf());

@@ -19,10 +19,10 @@
 pub mod batch;
 pub mod data;
 pub mod geometry;
+pub mod implicit_surface;
 pub mod io;
 pub mod pipeline;
 pub mod stages;
-pub mod implicit_surface;
 pub mod synthetic;
 pub mod synthetic_branching;
 pub mod synthetic_tree;

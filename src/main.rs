@@ -61,7 +61,9 @@ struct FixturesArgs {
 
 /// Parses a seed or a range of seeds FIRST-LAST.
 fn parse_seeds(text: &str) -> Result<(u64, u64), String> {
-    let number = |t: &str| t.trim().parse::<u64>().map_err(|_| format!("'{text}' is not a seed (a whole number) or a range FIRST-LAST"));
+    let number = |t: &str| {
+        t.trim().parse::<u64>().map_err(|_| format!("'{text}' is not a seed (a whole number) or a range FIRST-LAST"))
+    };
     match text.split_once('-') {
         Some((a, b)) => {
             let (a, b) = (number(a)?, number(b)?);
@@ -92,7 +94,11 @@ fn fixtures(args: FixturesArgs) -> vesselhex::Result<()> {
                 let redrawn = if t.redrawn.is_empty() {
                     String::new()
                 } else {
-                    format!(" (drawn {} times: {})", t.attempt + 1, t.redrawn.iter().map(|r| r.reason.as_str()).collect::<Vec<_>>().join("; "))
+                    format!(
+                        " (drawn {} times: {})",
+                        t.attempt + 1,
+                        t.redrawn.iter().map(|r| r.reason.as_str()).collect::<Vec<_>>().join("; ")
+                    )
                 };
                 eprintln!(
                     "vesselhex: random tree {seed}: {} ends, {} triangles{redrawn}; written to {}, {}, {}",

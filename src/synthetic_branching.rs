@@ -129,7 +129,13 @@ pub struct Opening {
 impl Opening {
     /// The end circle, open.
     pub fn circle(&self) -> EndCircle {
-        EndCircle { centre: self.centre, outward: self.outward, radius: self.radius, capped: false, beyond: f64::INFINITY }
+        EndCircle {
+            centre: self.centre,
+            outward: self.outward,
+            radius: self.radius,
+            capped: false,
+            beyond: f64::INFINITY,
+        }
     }
 }
 

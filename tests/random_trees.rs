@@ -107,7 +107,10 @@ fn pieces(vertex_count: usize, triangles: &[[u32; 3]]) -> usize {
 /// centroid (positive when the triangles face out).
 fn closed_volume6(vertices: &[Point3<f64>], triangles: &[[u32; 3]], loops: &[Vec<u32>]) -> f64 {
     let tet = |a: &Point3<f64>, b: &Point3<f64>, c: &Point3<f64>| a.coords.dot(&b.coords.cross(&c.coords));
-    let mut v: f64 = triangles.iter().map(|t| tet(&vertices[t[0] as usize], &vertices[t[1] as usize], &vertices[t[2] as usize])).sum();
+    let mut v: f64 = triangles
+        .iter()
+        .map(|t| tet(&vertices[t[0] as usize], &vertices[t[1] as usize], &vertices[t[2] as usize]))
+        .sum();
     for lp in loops {
         let c = Point3::from(lp.iter().map(|&i| vertices[i as usize].coords).sum::<Vector3<f64>>() / lp.len() as f64);
         // A boundary edge a -> b of the surface is closed by the triangle (b, a, c).
@@ -148,14 +151,17 @@ fn each_tree_is_one_outward_genus_0_manifold_with_its_ends_where_the_truth_says(
             let radial = |p: &Point3<f64>| ((p - c) - n * (p - c).dot(&n)).norm();
             if end["kind"] == "open" {
                 // One boundary loop, all in the end's plane on its circle (within a cell).
-                let on: Vec<usize> = (0..loops.len())
-                    .filter(|&l| loops[l].iter().all(|&i| in_plane(&s.vertices[i as usize])))
-                    .collect();
+                let on: Vec<usize> =
+                    (0..loops.len()).filter(|&l| loops[l].iter().all(|&i| in_plane(&s.vertices[i as usize]))).collect();
                 assert_eq!(on.len(), 1, "seed {seed}: end {} has {} boundary loops in its plane", end["id"], on.len());
                 loop_used[on[0]] = true;
                 for &i in &loops[on[0]] {
                     let d = radial(&s.vertices[i as usize]);
-                    assert!((d - r).abs() < h, "seed {seed}: end {}: a loop vertex {d} mm from the centre, radius {r}", end["id"]);
+                    assert!(
+                        (d - r).abs() < h,
+                        "seed {seed}: end {}: a loop vertex {d} mm from the centre, radius {r}",
+                        end["id"]
+                    );
                 }
             } else {
                 // A flat disc facing along the outward normal, of the circle's area.
@@ -169,7 +175,11 @@ fn each_tree_is_one_outward_genus_0_manifold_with_its_ends_where_the_truth_says(
                     }
                 }
                 let disc = std::f64::consts::PI * r * r;
-                assert!((area / disc - 1.0).abs() < 0.1, "seed {seed}: end {}: cap area {area}, circle {disc}", end["id"]);
+                assert!(
+                    (area / disc - 1.0).abs() < 0.1,
+                    "seed {seed}: end {}: cap area {area}, circle {disc}",
+                    end["id"]
+                );
             }
         }
         assert!(loop_used.iter().all(|&u| u), "seed {seed}: a boundary loop belongs to no end");

@@ -112,11 +112,16 @@ impl PathBuilder {
         };
         let d1 = |u: f64| {
             let u2 = u * u;
-            start.p.coords * (6.0 * u2 - 6.0 * u) + m0 * (3.0 * u2 - 4.0 * u + 1.0) + target.coords * (-6.0 * u2 + 6.0 * u)
+            start.p.coords * (6.0 * u2 - 6.0 * u)
+                + m0 * (3.0 * u2 - 4.0 * u + 1.0)
+                + target.coords * (-6.0 * u2 + 6.0 * u)
                 + m1 * (3.0 * u2 - 2.0 * u)
         };
         let d2 = |u: f64| {
-            start.p.coords * (12.0 * u - 6.0) + m0 * (6.0 * u - 4.0) + target.coords * (-12.0 * u + 6.0) + m1 * (6.0 * u - 2.0)
+            start.p.coords * (12.0 * u - 6.0)
+                + m0 * (6.0 * u - 4.0)
+                + target.coords * (-12.0 * u + 6.0)
+                + m1 * (6.0 * u - 2.0)
         };
         // Dense parameter samples, then points about `spacing` (or a tenth of the local
         // curvature radius) apart.

@@ -51,11 +51,13 @@ impl Layout {
         let tortuosity = rng.uniform();
         let capped = self.draw_capped(rng);
         for body_try in 0..4 {
-            let normal = rng.perpendicular(&direction, &anchor.t.cross(&direction).try_normalize(1e-9).unwrap_or(anchor.n));
+            let normal =
+                rng.perpendicular(&direction, &anchor.t.cross(&direction).try_normalize(1e-9).unwrap_or(anchor.n));
             let mut b = PathBuilder::new(anchor.p, direction, normal, radius, radius);
             b.straight(stretch);
             let body_start = b.length();
-            let left = (self.area_budget() - self.area).max(0.0) / self.draws.target_ends.saturating_sub(self.end_count()).max(1) as f64;
+            let left = (self.area_budget() - self.area).max(0.0)
+                / self.draws.target_ends.saturating_sub(self.end_count()).max(1) as f64;
             let budget_length = left / (std::f64::consts::TAU * radius) - stretch - 2.0 * radius;
             let length = (rng.range(BODY_RADII.0, BODY_RADII.1) * radius).min(budget_length).max(3.0 * radius);
             let mut steered = None;
@@ -216,7 +218,13 @@ impl Layout {
     pub fn clear(&self, id: usize, v: &Vessel) -> bool {
         let mut pieces = vessel_pieces(id, &v.samples);
         let last = v.last();
-        pieces.push(Piece { a: last.p, b: last.p + last.t * self.extension, sa: last.s, sb: last.s + self.extension, ..pieces[pieces.len() - 1] });
+        pieces.push(Piece {
+            a: last.p,
+            b: last.p + last.t * self.extension,
+            sa: last.s,
+            sb: last.s + self.extension,
+            ..pieces[pieces.len() - 1]
+        });
         if !self.clear_pieces(&pieces, v.zone.as_ref()) {
             return false;
         }

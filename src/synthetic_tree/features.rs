@@ -84,14 +84,24 @@ impl Layout {
     pub fn add_stenoses(&mut self, rng: &mut SeededRng) {
         while let Some(drawn) = self.pending_stenosis() {
             let thinnest = |v: &super::model::Vessel| {
-                v.samples.iter().filter(|q| q.s >= v.body.0 && q.s <= v.body.1).map(|q| q.r).fold(f64::INFINITY, f64::min)
+                v.samples
+                    .iter()
+                    .filter(|q| q.s >= v.body.0 && q.s <= v.body.1)
+                    .map(|q| q.r)
+                    .fold(f64::INFINITY, f64::min)
             };
             let feasible = self.vessels.iter().map(|v| 1.0 - (self.floor() / thinnest(v)).powi(2)).fold(0.0, f64::max);
             let area = drawn.min(feasible);
             let weights: Vec<f64> = self
                 .vessels
                 .iter()
-                .map(|v| if 1.0 - (self.floor() / thinnest(v)).powi(2) >= area { v.radius0 * (v.body.1 - v.body.0).max(0.0) } else { 0.0 })
+                .map(|v| {
+                    if 1.0 - (self.floor() / thinnest(v)).powi(2) >= area {
+                        v.radius0 * (v.body.1 - v.body.0).max(0.0)
+                    } else {
+                        0.0
+                    }
+                })
                 .collect();
             let placed = area >= 0.5
                 && weights.iter().any(|w| *w > 0.0)
@@ -141,10 +151,19 @@ impl Layout {
                 let q = sample_at(&self.vessels[host].samples, s);
                 let direction = rng.perpendicular(&q.t, &q.n);
                 let centre = q.p + direction * (q.r + (radius * radius - neck_radius * neck_radius).sqrt());
-                let k = (0.5 * neck_radius)
-                    .clamp(super::daughters::NECK_BLEND_CELLS.0 * self.h, super::daughters::NECK_BLEND_CELLS.1 * self.h);
+                let k = (0.5 * neck_radius).clamp(
+                    super::daughters::NECK_BLEND_CELLS.0 * self.h,
+                    super::daughters::NECK_BLEND_CELLS.1 * self.h,
+                );
                 let inner = neck_radius + k + self.gap_min;
-                let zone = Zone { a: q.p, b: centre, inner, outer: inner + neck_radius.max(2.0 * self.h), k, partners: vec![host] };
+                let zone = Zone {
+                    a: q.p,
+                    b: centre,
+                    inner,
+                    outer: inner + neck_radius.max(2.0 * self.h),
+                    k,
+                    partners: vec![host],
+                };
                 let sac = Sac { host, s, centre, radius, direction, neck_radius, zone };
                 if self.sac_is_clear(&sac, q.r) {
                     let id = self.vessels.len() + self.sacs.len();
@@ -192,7 +211,8 @@ impl Layout {
     pub fn survey_near_passes(&mut self) -> Vec<NearPass> {
         self.rebuild_index();
         let count = self.vessels.len();
-        let zone_of = |c: usize| if c < count { self.vessels[c].zone.as_ref() } else { Some(&self.sacs[c - count].zone) };
+        let zone_of =
+            |c: usize| if c < count { self.vessels[c].zone.as_ref() } else { Some(&self.sacs[c - count].zone) };
         let mut best: std::collections::BTreeMap<(usize, usize), NearPass> = Default::default();
         let largest = self.vessels.iter().map(|v| v.max_radius()).fold(0.0, f64::max);
         for (i, x) in self.index.pieces.iter().enumerate() {
@@ -224,7 +244,15 @@ impl Layout {
                         }
                     }
                 }
-                let pass = NearPass { a: x.comp, b: y.comp, gap: c.gap, point_a: c.p, point_b: c.q, radius_a: c.rp, radius_b: c.rq };
+                let pass = NearPass {
+                    a: x.comp,
+                    b: y.comp,
+                    gap: c.gap,
+                    point_a: c.p,
+                    point_b: c.q,
+                    radius_a: c.rp,
+                    radius_b: c.rq,
+                };
                 let entry = best.entry((x.comp, y.comp)).or_insert_with(|| pass.clone());
                 if pass.gap < entry.gap {
                     *entry = pass;

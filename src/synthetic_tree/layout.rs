@@ -49,7 +49,16 @@ impl TreeDraws {
         let stenosis_areas = (0..stenoses).map(|_| rng.range(0.5, 0.9)).collect();
         let aneurysms = rng.weighted(&[0.5, 0.35, 0.15]);
         let near_passes = rng.weighted(&[0.3, 0.4, 0.2, 0.1]);
-        TreeDraws { target_ends, radius_range, smallest_radius, end_style, stenoses, stenosis_areas, aneurysms, near_passes }
+        TreeDraws {
+            target_ends,
+            radius_range,
+            smallest_radius,
+            end_style,
+            stenoses,
+            stenosis_areas,
+            aneurysms,
+            near_passes,
+        }
     }
 }
 

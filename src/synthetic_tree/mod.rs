@@ -116,7 +116,9 @@ impl RandomTree {
             let lumen = TreeLumen::new(&layout);
             let circles: Vec<EndCircle> = ends.iter().map(|(_, c)| *c).collect();
             match mesh_tree(&lumen, &circles) {
-                Ok(surface) => return Ok(RandomTree { seed, attempt, redrawn, layout, ends, surface, lumen, near_passes }),
+                Ok(surface) => {
+                    return Ok(RandomTree { seed, attempt, redrawn, layout, ends, surface, lumen, near_passes })
+                }
                 Err(d) => redrawn.push(Redraw {
                     attempt,
                     reason: format!("{} near ({:.4}, {:.4}, {:.4}) mm", d.what, d.at.x, d.at.y, d.at.z),
@@ -310,8 +312,14 @@ pub fn write_surface_vtp(path: &Path, vertices: &[nalgebra::Point3<f64>], triang
             vertices.len(),
             triangles.len()
         )?;
-        writeln!(w, r#"      <Points><DataArray type="Float64" NumberOfComponents="3" format="binary">{points}</DataArray></Points>"#)?;
-        writeln!(w, r#"      <Polys><DataArray type="Int64" Name="connectivity" format="binary">{connectivity}</DataArray>"#)?;
+        writeln!(
+            w,
+            r#"      <Points><DataArray type="Float64" NumberOfComponents="3" format="binary">{points}</DataArray></Points>"#
+        )?;
+        writeln!(
+            w,
+            r#"      <Polys><DataArray type="Int64" Name="connectivity" format="binary">{connectivity}</DataArray>"#
+        )?;
         writeln!(w, r#"        <DataArray type="Int64" Name="offsets" format="binary">{offsets}</DataArray></Polys>"#)?;
         writeln!(w, "    </Piece>\n  </PolyData>\n</VTKFile>")
     })

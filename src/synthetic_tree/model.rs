@@ -291,7 +291,14 @@ mod tests {
 
     #[test]
     fn a_zone_blends_fully_inside_and_not_at_all_outside_with_a_consistent_gradient() {
-        let z = Zone { a: Point3::origin(), b: Point3::new(0.0, 0.0, 2.0), inner: 1.0, outer: 2.0, k: 0.4, partners: vec![] };
+        let z = Zone {
+            a: Point3::origin(),
+            b: Point3::new(0.0, 0.0, 2.0),
+            inner: 1.0,
+            outer: 2.0,
+            k: 0.4,
+            partners: vec![],
+        };
         assert_eq!(z.width(&Point3::new(0.5, 0.0, 1.0)).0, 0.4);
         assert_eq!(z.width(&Point3::new(2.5, 0.0, 1.0)).0, 0.0);
         let p = Point3::new(1.3, 0.4, 1.0);

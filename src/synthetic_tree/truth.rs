@@ -227,7 +227,13 @@ pub fn end_circles(layout: &Layout) -> Vec<(usize, EndCircle)> {
     let root = layout.vessels[0].first();
     out.push((
         0,
-        EndCircle { centre: root.p, outward: -root.t, radius: root.r, capped: layout.inlet_capped, beyond: beyond(root) },
+        EndCircle {
+            centre: root.p,
+            outward: -root.t,
+            radius: root.r,
+            capped: layout.inlet_capped,
+            beyond: beyond(root),
+        },
     ));
     for (id, v) in layout.vessels.iter().enumerate() {
         if v.finish == Finish::Free {
@@ -328,9 +334,8 @@ pub fn near_passes(layout: &Layout, passes: &[NearPass]) -> Vec<NearPassTruth> {
     passes
         .iter()
         .map(|p| {
-            let steered = layout.steered.iter().any(|s| {
-                (s.vessel, s.other) == (p.a, p.b) || (s.vessel, s.other) == (p.b, p.a)
-            });
+            let steered =
+                layout.steered.iter().any(|s| (s.vessel, s.other) == (p.a, p.b) || (s.vessel, s.other) == (p.b, p.a));
             NearPassTruth {
                 between: [component(p.a), component(p.b)],
                 points: [xyz(&p.point_a), xyz(&p.point_b)],
@@ -469,12 +474,8 @@ pub fn centerlines(
 ) -> Option<Centerlines> {
     use kiddo::{ImmutableKdTree, SquaredEuclidean};
     // Seeds on F = 0 only (a flat cap's vertices lie inside the tube it closes).
-    let on_lumen: Vec<Point3<f64>> = surface
-        .vertices
-        .iter()
-        .filter(|p| f.distance_estimate(p) <= 1e-9 * (1.0 + p.coords.norm()))
-        .copied()
-        .collect();
+    let on_lumen: Vec<Point3<f64>> =
+        surface.vertices.iter().filter(|p| f.distance_estimate(p) <= 1e-9 * (1.0 + p.coords.norm())).copied().collect();
     let points: Vec<[f64; 3]> = on_lumen.iter().map(|p| [p.x, p.y, p.z]).collect();
     let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points).ok()?;
     let per_vessel: Vec<Vec<(Point3<f64>, f64)>> = layout.vessels.iter().map(|v| dense_points(&v.samples)).collect();

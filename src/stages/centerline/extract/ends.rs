@@ -282,7 +282,12 @@ const NAMED_END_REACH: f64 = 1.0;
 
 /// The centre and equivalent radius of the triangles when they form a flat, roughly round disc
 /// bounded by a single loop.
-fn flat_disc(vertices: &[Point3<f64>], triangles: &[[u32; 3]], subset: &[u32], rim: Flatness) -> Option<(Point3<f64>, f64)> {
+fn flat_disc(
+    vertices: &[Point3<f64>],
+    triangles: &[[u32; 3]],
+    subset: &[u32],
+    rim: Flatness,
+) -> Option<(Point3<f64>, f64)> {
     let tris: Vec<[u32; 3]> = subset.iter().map(|&t| triangles[t as usize]).collect();
     let loops = boundary_loops(&tris);
     let [lp] = loops.as_slice() else { return None };
