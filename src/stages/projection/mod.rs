@@ -534,21 +534,30 @@ fn clean_span(
             )));
         }
     };
-    // A section that closes neither from the centerline nor from inside the lumen, in the half
-    // of the branch towards a vessel end, lies in a plane that crosses the end's opening (the
-    // vessel bends just before it): the mesh stops short of it on that side, at the next clean
-    // section (an end cut well short is said by its warning).
+    // A section that closes neither from the centerline nor from inside the lumen, and whose
+    // plane passes through the opening of the vessel end on its side (the vessel bends just
+    // before its end), misses through that opening: the mesh stops short of it on that side, at
+    // the next clean section (an end cut well short is said by its warning). Elsewhere such a
+    // section misses through a hole in the wall, refused below.
     let closes = |i: usize, p: &Probe| p.valid() || recentred_section(template, surface, &samples[i], orient).0.valid();
+    let crosses_opening = |i: usize, end: &CenterlineSample| {
+        (end.point - samples[i].point).dot(&samples[i].frame.tangent).abs() <= end.radius
+    };
+    let (first, last) = (&samples[0], &samples[samples.len() - 1]);
     let (mut i0, mut i1) = (i0, i1);
     let half = 0.5 * length;
     if !start_junction {
-        let bad = probes.iter().rev().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s < half && !closes(*i, p));
+        let bad = probes.iter().rev().find(|(i, p)| {
+            *i >= i0 && *i <= i1 && samples[*i].s < half && !closes(*i, p) && crosses_opening(*i, first)
+        });
         if let Some(next) = bad.and_then(|&(b, _)| probes.iter().find(|(i, _)| *i > b && clean[*i]).map(|c| c.0)) {
             i0 = next.min(i1);
         }
     }
     if !end_junction {
-        let bad = probes.iter().find(|(i, p)| *i >= i0 && *i <= i1 && samples[*i].s >= half && !closes(*i, p));
+        let bad = probes.iter().find(|(i, p)| {
+            *i >= i0 && *i <= i1 && samples[*i].s >= half && !closes(*i, p) && crosses_opening(*i, last)
+        });
         if let Some(prev) = bad.and_then(|&(b, _)| probes.iter().rev().find(|(i, _)| *i < b && clean[*i]).map(|c| c.0))
         {
             i1 = prev.max(i0);
