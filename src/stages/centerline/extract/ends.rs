@@ -60,6 +60,8 @@ const CAP_FLATNESS: f64 = 0.02;
 /// a rim of twenty points on a tube cut by hand strays from a plane by a few percent of the
 /// radius, and a cap's triangles strung across it cannot be flatter than it.
 const RIM_FLATNESS: f64 = 0.1;
+/// A cap must be round enough: isoperimetric quotient 4 pi A / L^2 above this (1 for a circle).
+const CAP_ROUNDNESS: f64 = 0.5;
 
 /// How flat a disc must be: within [`CAP_FLATNESS`] of a plane, or of its rim (see
 /// [`RIM_FLATNESS`]).
@@ -68,8 +70,7 @@ enum Flatness {
     Plane,
     AsItsRim,
 }
-/// ... and round enough: isoperimetric quotient 4 pi A / L^2 above this (1 for a circle).
-const CAP_ROUNDNESS: f64 = 0.5;
+
 /// Triangles grown into one planar region have normals within this angle (cosine).
 const REGION_COS: f64 = 0.9994; // 2 degrees
 
@@ -120,20 +121,20 @@ pub fn find_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: Option<
     // A cut cap first: the region its sharp rim bounds, however its triangles lean within it (a
     // fine cap over a rim that is not quite planar bends by more than the planar regions' 2
     // degrees near the rim, and would fall apart into pieces none of which spans the vessel).
-    let edges = RegionSurface::new(vertices, triangles);
+    let surface = RegionSurface::new(vertices, triangles);
     let mut taken = vec![false; triangles.len()];
     let mut caps: Vec<(u32, Cap)> = vec![];
     let candidates = |regions: Vec<(Vec<u32>, bool)>| {
         regions.into_iter().filter(|(r, _)| 2 * r.len() < triangles.len()).collect::<Vec<_>>()
     };
-    for (r, _) in candidates(edges.regions(&taken, |_, t, u| edges.smooth_edge(t, u))) {
+    for (r, _) in candidates(surface.regions(&taken, |_, t, u| surface.smooth_edge(t, u))) {
         if let Some(cap) = disc(&r, None, true, Flatness::AsItsRim) {
             r.iter().for_each(|&t| taken[t as usize] = true);
             caps.push((r[0], cap));
         }
     }
     // Then planar regions (a blunt end's face, its rim rounded), among the triangles left.
-    for (r, sharp) in candidates(edges.regions(&taken, |seed, _, u| edges.planar_with(seed, u))) {
+    for (r, sharp) in candidates(surface.regions(&taken, |seed, _, u| surface.planar_with(seed, u))) {
         caps.extend(disc(&r, None, sharp, Flatness::Plane).map(|cap| (r[0], cap)));
     }
     // In the order of their first triangles, whichever way each was found.
