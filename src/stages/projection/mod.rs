@@ -189,6 +189,18 @@ fn inside_lumen(surface: &LumenSurface, p: &Point3<f64>, orientation: f64, reach
     })
 }
 
+/// Whether the section at `station`, `probe` cast from its centerline point, closes: from there,
+/// or from inside the lumen (see [`recentred_section`]).
+fn section_closes(
+    probe: &Probe,
+    template: &SectionTemplate,
+    surface: &LumenSurface,
+    station: &CenterlineSample,
+    orientation: f64,
+) -> bool {
+    probe.valid() || recentred_section(template, surface, station, orientation).0.valid()
+}
+
 /// A section cast from the lumen itself rather than from the centerline's point: where the
 /// ordinary section's rays do not all meet the wall from inside (a tight or eccentric stenosis,
 /// a kink, a lumen whose smoothed centerline runs near one side), the section's centre moves,
@@ -346,7 +358,7 @@ pub fn project_branch(
     let Probed { probes, clean, inlet_closed, outlet_closed, dome_start, dome_end } =
         probe_branch(branch, caps, setup, (lo, hi), start_junction.is_some(), end_junction.is_some());
     let (i0, i1) = clean_span(branch, setup, &probes, &clean, start_junction.is_some(), end_junction.is_some())?;
-    let closes = |i: usize, p: &Probe| p.valid() || recentred_section(template, surface, &samples[i], orient).0.valid();
+    let closes = |i: usize, p: &Probe| section_closes(p, template, surface, &samples[i], orient);
     // A closed end keeps a margin from its cap, unless the sections were turned into the cap's
     // plane (they run parallel to it, clear of it).
     let r0 = samples[i0].radius;
@@ -539,7 +551,7 @@ fn clean_span(
     // before its end), misses through that opening: the mesh stops short of it on that side, at
     // the next clean section (an end cut well short is said by its warning). Elsewhere such a
     // section misses through a hole in the wall, refused below.
-    let closes = |i: usize, p: &Probe| p.valid() || recentred_section(template, surface, &samples[i], orient).0.valid();
+    let closes = |i: usize, p: &Probe| section_closes(p, template, surface, &samples[i], orient);
     let crosses_opening = |i: usize, end: &CenterlineSample| {
         (end.point - samples[i].point).dot(&samples[i].frame.tangent).abs() <= end.radius
     };
