@@ -12,6 +12,7 @@ use vesselhex::mesh::{is_sac, sets, Region};
 use vesselhex::pipeline::{mesh_vessel, Meshed};
 use vesselhex::progress::Progress;
 use vesselhex::surface::LumenSurface;
+use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
 use vesselhex::testing::{domed_tube_surface, straight_tube_centerline};
 
 /// The vessel meshed without a sac that cannot be closed: a Y bifurcation with one open end
@@ -41,6 +42,66 @@ fn a_sac_that_cannot_be_closed_leaves_the_rest_meshed_and_is_said() {
     assert!(unmeshed.len() == 1 && unmeshed[0]["kind"] == "sac", "{ends:?}");
     assert_eq!(report["branches"].as_array().unwrap().len(), 1);
     let _ = std::fs::remove_dir_all(&out);
+}
+
+/// A generated tree's saccular aneurysm, meshed from the bare surface as a user would: random
+/// tree 3 carries a sac of 2.1 mm on a vessel of 1.2 mm, its dome's tip 3.2 vessel radii off
+/// the axis, and open ends the Voronoi diagram escapes through. The true sac is found and meshed
+/// to its dome, no other pocket is taken for a sac (a ball beyond an open end was), every end
+/// is meshed, and no element is inverted.
+#[test]
+fn a_generated_trees_sac_is_meshed_to_its_dome_with_every_end() {
+    let dir = temp_dir("tree-sac");
+    let written = write_random_tree(3, &dir.join("input"), SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
+    let manifest = serde_json::to_value(written.tree.manifest("", "")).unwrap();
+    let out = dir.join("mesh");
+    let o = common::vesselhex(&[
+        "mesh",
+        "--surface",
+        common::path_str(&written.surface),
+        "--units",
+        "mm",
+        "--preset",
+        "coarse",
+        "--output",
+        common::path_str(&out),
+        "--quiet",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let ends = report["ends"].as_array().unwrap();
+    assert!(ends.iter().all(|e| e["meshed"] == true), "{ends:?}");
+    let point = |v: &serde_json::Value| {
+        nalgebra::Point3::new(v[0].as_f64().unwrap(), v[1].as_f64().unwrap(), v[2].as_f64().unwrap())
+    };
+    let sacs: Vec<_> = ends.iter().filter(|e| e["kind"] == "sac").collect();
+    let true_sacs = manifest["aneurysms"].as_array().unwrap();
+    // Each sac found lies in a true one, within its radius of the sac's centre ...
+    for sac in &sacs {
+        let inside = true_sacs.iter().any(|a| {
+            (point(&sac["position"]) - point(&a["sac_centre"])).norm() <= a["sac_radius_mm"].as_f64().unwrap()
+        });
+        assert!(inside, "a sac end found off every true sac: {sac}");
+    }
+    // ... and the one reaching farthest from its vessel (3.2 radii) is found.
+    let tall = true_sacs.iter().find(|a| a["height_vessel_radii"].as_f64().unwrap() > 3.0).unwrap();
+    assert!(
+        sacs.iter()
+            .any(|s| (point(&s["position"]) - point(&tall["sac_centre"])).norm()
+                <= tall["sac_radius_mm"].as_f64().unwrap()),
+        "{tall} not found: {sacs:?}"
+    );
+    // Its branch is closed by a dome, its hexes within the bar; none inverted anywhere.
+    let branches = report["branches"].as_array().unwrap();
+    let domes: Vec<_> = branches.iter().filter(|b| b["outlet_end"] == "dome").collect();
+    assert_eq!(domes.len(), sacs.len(), "{branches:?}");
+    assert!(domes.iter().all(|b| b["scaled_jacobian"]["min"].as_f64().unwrap() >= 0.2), "{domes:?}");
+    for region in ["lumen", "wall"] {
+        let min = report[region]["scaled_jacobian"]["min"].as_f64().unwrap();
+        assert!(min > 0.0, "{region}: minimum scaled Jacobian {min}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 const RADIUS: f64 = 2.0;

@@ -82,20 +82,10 @@ pub(crate) fn mesh_dropping_what_fails(
     let (meshed, centerlines) = match attempt {
         Ok(meshed) => (meshed, centerlines),
         // Sacs found on the surface never cost the vessel: refused with them, it is meshed
-        // without them, and each is said not meshed (a warning, report.json's ends, exit 3).
+        // without the one that fails (or all), and each left out is said not meshed (a warning,
+        // report.json's ends, exit 3).
         Err(e) if extracted && !tree_config.centerline.sacs_mm.is_empty() => {
-            let sacs = &tree_config.centerline.sacs_mm;
-            warnings.push(Warning::new(
-                "sac_not_meshed",
-                format!("the vessel is meshed without its sac(s); with them: {e}"),
-            ));
-            let centerlines = without_paths_to(&centerlines, sacs);
-            let config = MeshConfig {
-                centerline: crate::data::config::CenterlineConfig { sacs_mm: vec![], ..tree_config.centerline.clone() },
-                ..tree_config.clone()
-            };
-            let meshed = mesh_vessel(surface, &centerlines, &config, progress).map_err(|e| name_winding(e, surface))?;
-            (meshed, centerlines)
+            mesh_leaving_out_sacs(surface, centerlines, tree_config, &e, warnings, progress)?
         }
         // A branch found on the surface that ends too close to its junction for the junction's
         // transition (a short capped stub in an aorto-iliac's crotch) does not cost the rest: the
@@ -111,6 +101,48 @@ pub(crate) fn mesh_dropping_what_fails(
         Err(e) => return Err(name_winding(e, surface)),
     };
     Ok((meshed, centerlines, short_branches))
+}
+
+/// The vessel refused (`refusal`) with the sacs the extraction found, meshed without them: of
+/// two or more, without each in turn first (in order; the first mesh kept), since one sac that
+/// cannot be meshed should not cost the others (random tree 12: a true sac left out with a
+/// stub its junction leaves, which no section clears); else without them all. A warning names
+/// each sac left out and the refusal with it. Returns the mesh and its centerlines.
+fn mesh_leaving_out_sacs(
+    surface: &TriangleSurface,
+    centerlines: Centerlines,
+    tree_config: &MeshConfig,
+    refusal: &Error,
+    warnings: &mut Vec<Warning>,
+    progress: &mut Progress,
+) -> Result<(Meshed, Centerlines)> {
+    let sacs = &tree_config.centerline.sacs_mm;
+    let keeping = |kept: Vec<[f64; 3]>| MeshConfig {
+        centerline: crate::data::config::CenterlineConfig { sacs_mm: kept, ..tree_config.centerline.clone() },
+        ..tree_config.clone()
+    };
+    if sacs.len() > 1 {
+        for (k, sac) in sacs.iter().enumerate() {
+            let kept: Vec<[f64; 3]> = sacs.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, p)| *p).collect();
+            let without = without_paths_to(&centerlines, &[*sac]);
+            if let Ok(meshed) = mesh_vessel(surface, &without, &keeping(kept), progress) {
+                let [x, y, z] = *sac;
+                warnings.push(Warning::new(
+                    "sac_not_meshed",
+                    format!(
+                        "the vessel is meshed without its sac at ({x:.3}, {y:.3}, {z:.3}) mm, with its other sac(s); \
+                         with it: {refusal}"
+                    ),
+                ));
+                return Ok((meshed, without));
+            }
+        }
+    }
+    warnings
+        .push(Warning::new("sac_not_meshed", format!("the vessel is meshed without its sac(s); with them: {refusal}")));
+    let without = without_paths_to(&centerlines, sacs);
+    let meshed = mesh_vessel(surface, &without, &keeping(vec![]), progress).map_err(|e| name_winding(e, surface))?;
+    Ok((meshed, without))
 }
 
 /// [`mesh_vessel`] with the junctions' arrangements `policy` allows.

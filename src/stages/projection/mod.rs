@@ -346,8 +346,11 @@ pub fn project_branch(
             });
         }
     }
+    // A sac's transition may run to its end, the centre of the sac's largest ball (see
+    // `clear_transition_length`): its last section stands there, the dome beyond.
+    let sac = setup.dome_end && start_junction.is_some() && end_junction.is_none();
     // Whether the sections past a transition suffice is decided below, on the clean ones.
-    if hi <= lo {
+    if hi <= lo && !(sac && lo <= length) {
         return Err(Error::Geometry(format!(
             "{}: branch {name} ({length:.2} mm long) ends within its junction's transition ({:.2} mm): mesh a longer \
              stretch of the vessel",
@@ -371,6 +374,15 @@ pub fn project_branch(
         Some(_) => hi,
         None => samples[i1].s - r1 * (trim_outlet + if dome_end { CLOSED_END_MARGIN } else { 0.0 }),
     };
+    // A sac's branch ends at the centre of the sac's largest ball, its dome a ball's radius
+    // ahead: a hemisphere, the dome's own case (see `dome::project_dome`), which needs no margin
+    // from the tip. A compact sac, a ball on its vessel's side whose centre lies a vessel radius
+    // or two from the axis (random tree 3: 3.2 mm out of a vessel of 1.2 mm), leaves no room for
+    // the margin past its junction's transition, so its last section stands at the ball's centre.
+    let s_end = match end_junction {
+        None if setup.dome_end && s_end - s_start < 0.5 * (r0 + r1) => samples[i1].s,
+        _ => s_end,
+    };
     // Between the ends, a section that does not close from the centerline may from inside the
     // lumen (see `recentred_section`).
     if let Some((bad, p)) = probes.iter().find(|(i, p)| {
@@ -389,8 +401,9 @@ pub fn project_branch(
     }
     // A vessel end too close to its junction for a stretch of ordinary sections (a short branch
     // clipped obliquely): the transition runs on to the end's section, the only ordinary one.
-    let stub =
-        start_junction.is_some() != end_junction.is_some() && s_end > s_start && s_end - s_start < 0.5 * (r0 + r1);
+    let stub = start_junction.is_some() != end_junction.is_some()
+        && (s_end > s_start || sac && s_end >= s_start)
+        && s_end - s_start < 0.5 * (r0 + r1);
     if s_end - s_start < 0.5 * (r0 + r1) && !stub {
         return Err(Error::Geometry(format!(
             "{}: only {:.3} mm of branch {name} (from {:.2} to {:.2} mm) has clean cross-sections, too short to \
@@ -530,6 +543,16 @@ fn clean_span(
     let last_clean = probes.iter().rev().find(|(i, _)| clean[*i] || end_junction).map(|(i, _)| *i);
     let (i0, i1) = match (first_clean, last_clean) {
         (Some(a), Some(b)) if a < b || (a == b && (start_junction || end_junction)) => (a, b),
+        _ if setup.dome_end && start_junction && !end_junction => {
+            // A sac's sections all meet its wall at a slant (the dome leaning into them) or run
+            // into the junction: the pocket is no blind tube a dome could close.
+            return Err(Error::Geometry(format!(
+                "{}: the sac at the end of branch {name} ({length:.2} mm from its junction) cannot be meshed as a \
+                 blind branch closed by a dome: none of its cross-sections meets the sac's wall square enough for a \
+                 section (its wall leans into every one, as a pocket's opening into its junction does)",
+                surface.source.display(),
+            )));
+        }
         _ => {
             let mid = &samples[samples.len() / 2];
             let p = cast_section(template, surface, mid, orient).0;
@@ -711,6 +734,11 @@ pub fn clear_transition_length(
     // project_branch (a short branch keeps only its end's section).
     let (run_reach, reach) =
         if far_junction { (0.5 * len, 0.5 * len) } else { (len - FAR_END_MARGIN * r, len - OUTLET_KEEP * r) };
+    // A sac's branch ends at the centre of the sac's largest ball, a ball's radius short of the
+    // tip, which its dome closes (see `project_branch`): its last section may stand there.
+    let sac = setup.dome_end && !far_junction;
+    let reach = if sac { len } else { reach };
+    let before_far_end = |d: f64| if sac { d <= len } else { d < 0.9 * len };
     let estimate = crate::stages::junction::transition_length(geometry, slot);
     let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     let at = |d: f64| branch.at(if at_start { d } else { len - d });
@@ -768,7 +796,7 @@ pub fn clear_transition_length(
     };
     let search = |max_bend: f64| {
         let mut d = estimate;
-        while d < estimate + CLEAR_SEARCH * r && d < 0.9 * len && d <= reach {
+        while d < estimate + CLEAR_SEARCH * r && before_far_end(d) && d <= reach {
             if last_section(d, max_bend) {
                 return Some(d);
             }
@@ -785,8 +813,9 @@ pub fn clear_transition_length(
     }
     // A branch shorter than the estimate (a wide trunk capped close to its junction): nearer the
     // junction, a clear section gives a steeper transition, but a mesh.
+    // So may a sac's, when no section clears the junction between the estimate and its end.
     let mut d = reach;
-    while setup.steep_short_branches && estimate > reach && d >= NEAREST_SECTION * r {
+    while setup.steep_short_branches && (estimate > reach || sac) && d >= NEAREST_SECTION * r {
         if last_section(d, MAX_BEND) {
             return Ok(Some(d));
         }
@@ -806,6 +835,20 @@ pub fn clear_transition_length(
         geometry.centre.y,
         geometry.centre.z
     );
+    if sac {
+        // The sac's far end is its dome, not an opening a longer stretch of surface would move.
+        let end = at(len).point;
+        return Err(Error::ShortBranch {
+            message: format!(
+                "{place}: the sac cannot be meshed as a blind branch closed by a dome: no cross-section of the branch \
+                 up to the centre of the sac's largest ball ({len:.2} mm from the junction, radius {:.2} mm) lies \
+                 past the junction's folded end and clear of the other branches (the junction's transition needs \
+                 {estimate:.2} mm): the sac opens too close to the junction",
+                at(len).radius
+            ),
+            end_mm: end.into(),
+        });
+    }
     if estimate > reach {
         let end = at(len).point;
         return Err(Error::ShortBranch {

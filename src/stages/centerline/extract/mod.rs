@@ -284,7 +284,11 @@ impl EndSearch {
     /// [`EndKind::Sac`], meshed as a blind branch to its dome.
     fn add_sacs(&mut self) {
         let covered = paths_between(&self.graph, &self.end_nodes);
-        for node in rounded::sac_ends(&self.graph, &covered) {
+        // Inside the surface closed across its open ends and cut caps: the winding number of the
+        // open surface is about 1 there (its sign the triangles' facing), below a half beyond
+        // an opening.
+        let in_lumen = |p: &Point3<f64>| self.lumen.winding_number(p).abs() >= 0.5;
+        for node in rounded::sac_ends(&self.graph, &covered, &in_lumen) {
             let ball = self.graph.nodes[node as usize];
             self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Sac });
             self.end_nodes.push(node);
