@@ -547,18 +547,23 @@ fn rounded_cap_tips_work_as_given_ends() {
     assert!(message.contains("60.0"), "the distance is named: {message}");
 }
 
-/// Generated tree 1 (one genus-0 manifold piece, six open ends): its medial balls fall in parts
-/// (one layer of Delaunay tetrahedra across a branch fails the internal-ball tests), but its
-/// lumen is one. Every true end is found, and every path from the inlet runs inside the lumen.
+/// Generated tree 1 as `vesselhex fixtures` writes it (STL; one genus-0 manifold piece, six open
+/// ends): its medial balls fall in parts (one layer of Delaunay tetrahedra across a branch fails
+/// the internal-ball tests), but its lumen is one. Every true end is found, and every path from
+/// the inlet runs inside the lumen.
 #[test]
 fn every_end_of_a_connected_lumen_is_reached_though_its_medial_balls_fall_in_parts() {
-    let tree = vesselhex::synthetic_tree::RandomTree::generate(1, &mut Progress::new(true, 0)).unwrap();
-    let surface = TriangleSurface {
-        vertices: tree.surface.vertices.clone(),
-        triangles: tree.surface.triangles.clone(),
-        triangle_tags: None,
-        source: "tree_1".into(),
-    };
+    let dir = temp_dir("tree_1");
+    let written = vesselhex::synthetic_tree::write_random_tree(
+        1,
+        &dir,
+        vesselhex::synthetic_tree::SurfaceFormat::Stl,
+        &mut Progress::new(true, 0),
+    )
+    .unwrap();
+    let (surface, _) =
+        vesselhex::input::clean_surface(read_surface(&written.surface, LengthUnit::Mm).unwrap()).unwrap();
+    let tree = written.tree;
     let ex = extract_centerlines(&surface, &ExtractOptions::default()).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(ex.ends.len(), tree.ends.len(), "ends found: {:?}", ex.ends);
     for (_, truth) in &tree.ends {
@@ -566,7 +571,7 @@ fn every_end_of_a_connected_lumen_is_reached_though_its_medial_balls_fall_in_par
         assert!(nearest < truth.radius, "true end at {:?}: nearest end found {nearest:.3} mm away", truth.centre);
     }
     assert_eq!(ex.centerlines.polylines.len(), tree.ends.len() - 1);
-    let lumen = LumenSurface::from_parts(surface.vertices.clone(), surface.triangles.clone(), "tree_1".into()).unwrap();
+    let lumen = LumenSurface::new(&surface).unwrap();
     // Inside: a winding number above one half. Seen from within a radius of an open end the
     // opening takes a share of it, so the points that near either end of a line are left out.
     let near_an_end = |p: &Point3<f64>| ex.ends.iter().any(|e| (p - e.centre).norm() < 2.0 * e.radius);
@@ -576,6 +581,7 @@ fn every_end_of_a_connected_lumen_is_reached_though_its_medial_balls_fall_in_par
             assert!(lumen.winding_number(p) > 0.5, "a centerline point at {p:?} lies outside the lumen");
         }
     }
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Two tubes apart are two lumens: the ends of the one without the inlet are refused, in one line.
