@@ -28,6 +28,15 @@ impl PartialOrd for Entry {
     }
 }
 
+/// A path through the lumen from node `from` to node `to` of another part of the graph,
+/// through `balls` (see `bridges`).
+#[derive(Debug, Clone)]
+pub struct Chain {
+    pub from: u32,
+    pub to: u32,
+    pub balls: Vec<Ball>,
+}
+
 /// Balls (nodes) and the links between overlapping ones, each with its cost.
 pub struct BallGraph {
     pub nodes: Vec<Ball>,
@@ -38,6 +47,27 @@ impl BallGraph {
     /// A graph of the given balls and links (both ways, cost per link).
     pub fn from_parts(nodes: Vec<Ball>, links: Vec<Vec<(u32, f64)>>) -> BallGraph {
         BallGraph { nodes, links }
+    }
+
+    /// The chain's balls as nodes, linked in order from `from` to `to`.
+    pub fn add_chain(&mut self, chain: Chain) {
+        let mut at = chain.from;
+        for ball in chain.balls {
+            self.nodes.push(ball);
+            self.links.push(vec![]);
+            let id = (self.nodes.len() - 1) as u32;
+            self.link(at, id);
+            at = id;
+        }
+        self.link(at, chain.to);
+    }
+
+    /// Links `a` and `b` with VMTK's cost, length x mean(1/R).
+    fn link(&mut self, a: u32, b: u32) {
+        let (p, q) = (self.nodes[a as usize], self.nodes[b as usize]);
+        let cost = (p.centre - q.centre).norm() * 0.5 * (1.0 / p.radius + 1.0 / q.radius);
+        self.links[a as usize].push((b, cost));
+        self.links[b as usize].push((a, cost));
     }
 
     /// The inscribed ball at a point of the surface or of the lumen: the largest ball that
@@ -66,7 +96,11 @@ impl BallGraph {
     /// radius) or inside the lumen (the inscribed ball under a rounded end). It is linked to
     /// every node whose ball holds it; an end on the surface, which no empty ball holds, to the
     /// largest ball through it (VMTK's seed: the largest internal tetrahedron at the cap centre),
-    /// or failing that to the ball reaching deepest past it.
+    /// or failing that to the ball reaching deepest past it, when it reaches within the end's
+    /// radius: a ball whose sphere lies farther from the end than that is not the vessel there,
+    /// and a link to it would cross the wall (a decimated branch, its triangles longer than the
+    /// vessel is wide, can hold no ball for tens of its radii). With none, the end is a part of
+    /// its own, joined to the others through the lumen (see `bridges`).
     pub fn add_end(&mut self, end: Ball) -> u32 {
         let id = self.nodes.len() as u32;
         let gap = |n: usize| (self.nodes[n].centre - end.centre).norm() - self.nodes[n].radius;
@@ -76,7 +110,11 @@ impl BallGraph {
             let through = (0..self.nodes.len())
                 .filter(|&n| gap(n) <= touch)
                 .max_by(|&a, &b| self.nodes[a].radius.total_cmp(&self.nodes[b].radius).then(b.cmp(&a)));
-            let deepest = || (0..self.nodes.len()).min_by(|&a, &b| gap(a).total_cmp(&gap(b)).then(a.cmp(&b)));
+            let deepest = || {
+                (0..self.nodes.len())
+                    .filter(|&n| gap(n) <= end.radius)
+                    .min_by(|&a, &b| gap(a).total_cmp(&gap(b)).then(a.cmp(&b)))
+            };
             through.or_else(deepest).into_iter().collect()
         } else {
             holding

@@ -48,6 +48,7 @@
 //! (the ball stops growing there), whose ball becomes the end. The inlet is the largest end, or
 //! the end nearest a point.
 
+mod bridges;
 mod centring;
 mod ends;
 mod medial;
@@ -62,7 +63,7 @@ pub use ends::{find_caps, names_of_ends, Cap, EndKind, Hole, InletChoice, Vessel
 pub use split::branch_split;
 
 use crate::data::error::{Error, Result};
-use crate::geometry::surface::LumenSurface;
+use crate::geometry::surface::{LumenSurface, SolidSurface};
 use crate::io::input::{topology, CenterlinePolyline, Centerlines, NamedCap, TriangleSurface};
 use indexmap::IndexMap;
 use medial::{Ball, BallGraph};
@@ -137,9 +138,15 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
     let mut search = EndSearch::new(surface, &options.caps, &mut notes)?;
     search.add_given(&options.ends, EndKind::Given)?;
     search.add_given(&options.sacs, EndKind::Sac)?;
+    // Each search below grows from the paths to the ends found before it, so the parts of the
+    // ball graph that hold those ends are joined through the lumen first (see `bridges`).
+    search.join_parts();
     search.add_rounded();
+    search.join_parts();
     search.add_blunt()?;
+    search.join_parts();
     search.add_sacs();
+    search.join_parts();
     let EndSearch { graph, found, end_nodes, lumen, holes, .. } = search;
     if found.len() < 2 {
         return Err(Error::input(
@@ -196,6 +203,9 @@ struct EndSearch {
     /// out of the surface the radii are measured on.
     triangles: Vec<[u32; 3]>,
     in_cap: Vec<bool>,
+    /// The Delaunay tetrahedra of the closed surface's samples, to join the graph's parts that
+    /// hold ends (`None` when the closed surface is not a manifold one can tell inside from).
+    tets: Option<bridges::LumenTets>,
 }
 
 impl EndSearch {
@@ -213,7 +223,10 @@ impl EndSearch {
         let sign = if topology::signed_volume6(vertices, &triangles, &loops) > 0.0 { -1.0 } else { 1.0 };
         let (closed_vertices, closed_triangles) = topology::close_with_caps(vertices, &triangles, &loops, sign);
         let (samples, normals) = sampling::resample(&closed_vertices, &closed_triangles);
-        let mut graph = voronoi::medial_graph(&samples, &normals).map_err(|e| Error::input(source, e))?;
+        let (mut graph, tessellation, node_of) =
+            voronoi::medial_graph(&samples, &normals).map_err(|e| Error::input(source, e))?;
+        let solid = SolidSurface::new(&closed_vertices, &closed_triangles);
+        let tets = solid.map(|solid| bridges::LumenTets::new(tessellation, node_of, samples, solid));
 
         let (mut found, holes) = ends::loop_ends(vertices, &loops, |c, radius| graph.pole(c, 0.5 * radius).radius);
         notes.extend(holes.iter().map(|h| {
@@ -247,7 +260,15 @@ impl EndSearch {
         let inward = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
         let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
         let end_nodes = found.iter().map(|e| graph.add_end(Ball { centre: e.centre, radius: e.radius })).collect();
-        Ok(EndSearch { graph, found, end_nodes, lumen, inward, holes, blunt, triangles, in_cap })
+        Ok(EndSearch { graph, found, end_nodes, lumen, inward, holes, blunt, triangles, in_cap, tets })
+    }
+
+    /// Joins the parts of the ball graph that hold the ends found so far, through the lumen (see
+    /// `bridges`): the paths to every end then run inside the lumen whatever its medial balls.
+    fn join_parts(&mut self) {
+        if let Some(tets) = &self.tets {
+            bridges::join_ends(&mut self.graph, tets, &self.end_nodes);
+        }
     }
 
     /// The points given (`--ends`, or `--sacs` with `kind` sac) that name no end found: the

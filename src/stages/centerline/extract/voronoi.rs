@@ -11,7 +11,7 @@
 //! vessel surfaces are made of.
 
 use super::medial::{Ball, BallGraph};
-use super::qhull::delaunay;
+use super::qhull::{delaunay, Delaunay};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
@@ -55,7 +55,14 @@ fn spans_its_ball(corners: &[Point3<f64>; 4], radius: f64) -> bool {
 /// circumsphere (empty of samples: VMTK's MaximumInscribedSphereRadius); a link per shared face
 /// whose two balls overlap, so the segment between the centres lies in their union, inside the
 /// lumen. Link cost: length x mean(1/R), VMTK's 1/R cost.
-pub fn medial_graph(samples: &[Point3<f64>], normals: &[Vector3<f64>]) -> Result<BallGraph, String> {
+///
+/// Those links are kept inside the lumen, but they may leave a connected lumen in parts: the
+/// tessellation and each tetrahedron's node (`u32::MAX`: none) come back too, to join the parts
+/// that hold the vessel's ends through the lumen (see `bridges`).
+pub fn medial_graph(
+    samples: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+) -> Result<(BallGraph, Delaunay, Vec<u32>), String> {
     let dt = delaunay(samples)?;
     let balls: Vec<Option<Ball>> = dt
         .tets
@@ -96,6 +103,5 @@ pub fn medial_graph(samples: &[Point3<f64>], normals: &[Vector3<f64>]) -> Result
             }
         }
     }
-    let graph = BallGraph::from_parts(nodes, links);
-    Ok(graph)
+    Ok((BallGraph::from_parts(nodes, links), dt, node_of))
 }
