@@ -55,21 +55,7 @@ fn a_generated_trees_sac_is_meshed_to_its_dome_with_every_end() {
     let written = write_random_tree(3, &dir.join("input"), SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
     let manifest = serde_json::to_value(written.tree.manifest("", "")).unwrap();
     let out = dir.join("mesh");
-    let o = common::vesselhex(&[
-        "mesh",
-        "--surface",
-        common::path_str(&written.surface),
-        "--units",
-        "mm",
-        "--preset",
-        "coarse",
-        "--output",
-        common::path_str(&out),
-        "--quiet",
-    ]);
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let report = common::mesh_surface_cli(&written.surface, &out, &["--units", "mm", "--preset", "coarse"]);
     let ends = report["ends"].as_array().unwrap();
     assert!(ends.iter().all(|e| e["meshed"] == true), "{ends:?}");
     let point = |v: &serde_json::Value| {
