@@ -140,6 +140,23 @@ impl LumenSurface {
         total / (4.0 * std::f64::consts::PI)
     }
 
+    /// The triangles that may cross the plane through `centre` normal to `normal` (unit) within
+    /// the box of half-width `reach` about `centre`: those whose bounding boxes meet both, in
+    /// increasing order.
+    pub fn triangles_near_plane(&self, centre: &Point3<f64>, normal: &Vector3<f64>, reach: f64) -> Vec<u32> {
+        let (lo, hi) = (centre.coords.add_scalar(-reach), centre.coords.add_scalar(reach));
+        let meets = |mins: PVec, maxs: PVec| {
+            let inside_box = (0..3).all(|k| mins[k] <= hi[k] && maxs[k] >= lo[k]);
+            // The box's extent along the normal against its centre's distance from the plane.
+            let half: f64 = (0..3).map(|k| 0.5 * (maxs[k] - mins[k]) * normal[k].abs()).sum();
+            let mid: f64 = (0..3).map(|k| (0.5 * (maxs[k] + mins[k]) - centre[k]) * normal[k]).sum();
+            inside_box && mid.abs() <= half
+        };
+        let mut found: Vec<u32> = self.trimesh.bvh().leaves(|node| meets(node.mins(), node.maxs())).collect();
+        found.sort_unstable();
+        found
+    }
+
     /// Axis-aligned bounding box (min, max).
     pub fn bounding_box(&self) -> (Point3<f64>, Point3<f64>) {
         let mut lo = Point3::from([f64::INFINITY; 3]);

@@ -17,6 +17,7 @@ use crate::stages::projection::end_planes::EndCaps;
 use nalgebra::{Point3, Vector2, Vector3};
 use rayon::prelude::*;
 
+mod cut;
 mod dome;
 pub mod end_planes;
 pub mod plan;
@@ -190,7 +191,7 @@ fn inside_lumen(surface: &LumenSurface, p: &Point3<f64>, orientation: f64, reach
 }
 
 /// Whether the section at `station`, `probe` cast from its centerline point, closes: from there,
-/// or from inside the lumen (see [`recentred_section`]).
+/// or from inside the lumen (see [`recentred_section`]), or on the plane's cut (see [`cut`]).
 fn section_closes(
     probe: &Probe,
     template: &SectionTemplate,
@@ -198,7 +199,9 @@ fn section_closes(
     station: &CenterlineSample,
     orientation: f64,
 ) -> bool {
-    probe.valid() || recentred_section(template, surface, station, orientation).0.valid()
+    probe.valid()
+        || recentred_section(template, surface, station, orientation).0.valid()
+        || cut::cut_section(template, surface, station, orientation).is_some_and(|c| c.0.valid())
 }
 
 /// A section cast from the lumen itself rather than from the centerline's point: where the
@@ -273,7 +276,8 @@ fn recentred_section(
 }
 
 /// An ordinary section: cast from the centerline, or recentred in the lumen where that does not
-/// close (see [`recentred_section`]).
+/// close (see [`recentred_section`]), or built on the plane's cut through the surface where
+/// neither does (see [`cut`]).
 fn ordinary_section(
     template: &SectionTemplate,
     surface: &LumenSurface,
@@ -286,9 +290,11 @@ fn ordinary_section(
     }
     let recentred = recentred_section(template, surface, station, orientation);
     if recentred.0.valid() {
-        recentred
-    } else {
-        cast
+        return recentred;
+    }
+    match cut::cut_section(template, surface, station, orientation) {
+        Some(cut) if cut.0.valid() => cut,
+        _ => cast,
     }
 }
 
