@@ -227,7 +227,8 @@ mod tests {
         let loops = plane_loops(&s, &plane_at(5.3, 0.0), 5.0);
         assert_eq!(loops.len(), 1);
         let l = &loops[0];
-        assert_eq!(l.points.len(), 48);
+        // Each quad of the wall is two triangles: the cut crosses its upright edge and its diagonal.
+        assert_eq!(l.points.len(), 96);
         for p in &l.points {
             assert!((p.z - 5.3).abs() < 1e-12);
             let rho = (p.x * p.x + p.y * p.y).sqrt();
