@@ -5,8 +5,9 @@
 //! every ray meets the surface from the inside and no hit triangle faces along the axis (a cap
 //! would). The mesh runs between the first and the last clean sections, a margin away from a
 //! closed end, so no lumen node lands on a cap or beyond an open end; every section in between
-//! must at least be *valid* (every ray hits from the inside), otherwise the run stops with the
-//! place and the cause.
+//! must at least be *valid* (every ray hits from the inside): cast from the centerline, from a
+//! point deeper in the lumen, or built on the closed loop where the section's plane cuts the
+//! surface ([`cut`]); otherwise the run stops with the place and the cause.
 
 use crate::data::error::{Error, Result};
 use crate::geometry::surface::LumenSurface;
@@ -396,8 +397,9 @@ pub fn project_branch(
     }) {
         return Err(Error::Geometry(format!(
             "{}: the cross-section of branch {name} {} does not close: {} of {} rays miss the lumen surface and {} \
-             meet it from outside. The surface may have a hole there, or the centerline leaves the lumen; repair \
-             the surface or smooth the centerline (centerline.smoothing_passes)",
+             meet it from outside, and its plane cuts the surface in no closed loop around the centerline. The \
+             surface may have a hole there, or the plane leans out through an open vessel end nearby; repair the \
+             surface, clip the end square across, or smooth the centerline (centerline.smoothing_passes)",
             surface.source.display(),
             where_(&samples[*bad]),
             p.misses,
