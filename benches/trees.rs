@@ -13,6 +13,11 @@
 //! `VESSELHEX_TREE_PRESETS` (comma-separated, default coarse); `VESSELHEX_TREE_BIN=FILE`
 //! meshes with another build of `vesselhex`; `VESSELHEX_TREE_KEEP=DIR` writes the trees and
 //! meshes into DIR and keeps them.
+//!
+//! `VESSELHEX_TREE_SEPARATION=1` meshes nothing: it generates each tree and prints the pairs of
+//! vessels fused outside a shared junction's blend zone
+//! ([`vesselhex::synthetic_tree::separation`]) by cause, the near passes whose gap the
+//! triangulated surface closes where the implicit lumen keeps it open, and the trees per bin.
 
 use nalgebra::Point3;
 use std::collections::BTreeMap;
@@ -223,8 +228,79 @@ fn print_causes(rows: &[&Row]) {
     }
 }
 
+/// The separation survey (`VESSELHEX_TREE_SEPARATION=1`): per seed, the fused pairs and the
+/// near passes the surface closes; then the counts by cause and the trees per bin.
+fn survey_separation(seeds: &[u64]) {
+    use vesselhex::synthetic_tree::separation::{fused_runs, passes_closed_in_surface};
+    use vesselhex::synthetic_tree::RandomTree;
+    let mut trees_by_cause: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut pairs_by_cause: BTreeMap<&str, (usize, f64)> = BTreeMap::new();
+    let mut bins: BTreeMap<(usize, String), usize> = BTreeMap::new();
+    let (mut fused_trees, mut closed_trees, mut passes, mut closed_passes) = (0, 0, 0, 0);
+    for &seed in seeds {
+        let tree = match RandomTree::generate(seed, &mut Progress::new(true, 0)) {
+            Ok(tree) => tree,
+            Err(e) => {
+                println!("seed {seed}: {e}");
+                continue;
+            }
+        };
+        let runs = fused_runs(&tree.layout);
+        let closed =
+            passes_closed_in_surface(&tree.surface.vertices, &tree.surface.triangles, &tree.lumen, &tree.near_passes);
+        passes += tree.near_passes.len();
+        closed_passes += closed.len();
+        fused_trees += usize::from(!runs.is_empty());
+        closed_trees += usize::from(!closed.is_empty());
+        let mut causes: Vec<&str> = runs.iter().map(|r| r.relation.name()).collect();
+        causes.sort_unstable();
+        causes.dedup();
+        for c in causes {
+            *trees_by_cause.entry(c).or_default() += 1;
+        }
+        for r in &runs {
+            let e = pairs_by_cause.entry(r.relation.name()).or_default();
+            e.0 += 1;
+            e.1 = e.1.max(r.length_radii);
+            println!("seed {seed}: {r}");
+        }
+        for (i, w) in closed {
+            let p = &tree.near_passes[i];
+            println!(
+                "seed {seed}: near pass {} - {} (gap {:.3} mm) closed in the surface (winding {w:.2})",
+                p.a, p.b, p.gap
+            );
+        }
+        let manifest = serde_json::to_value(tree.manifest("s", "c")).unwrap_or_default();
+        for (k, (name, _)) in BINS.iter().enumerate() {
+            let value = manifest["bins"][name].as_str().unwrap_or("?").to_string();
+            *bins.entry((k, value)).or_default() += 1;
+        }
+    }
+    println!(
+        "\nseeds {}..{}: {fused_trees} trees with a pair fused outside its junction's blend zone",
+        seeds.first().unwrap_or(&0),
+        seeds.last().unwrap_or(&0)
+    );
+    for (cause, trees) in &trees_by_cause {
+        let (pairs, longest) = pairs_by_cause[cause];
+        println!("  {cause}: {trees} trees, {pairs} pairs, longest run {longest:.1} radii");
+    }
+    println!("{closed_trees} trees with a near pass the surface closes ({closed_passes} of {passes} near passes)");
+    println!("trees per bin:");
+    for (k, (_, title)) in BINS.iter().enumerate() {
+        let row: Vec<String> =
+            bins.iter().filter(|((b, _), _)| *b == k).map(|((_, v), n)| format!("{v}: {n}")).collect();
+        println!("  {title}: {}", row.join(", "));
+    }
+}
+
 fn main() {
     let seeds = seeds();
+    if std::env::var_os("VESSELHEX_TREE_SEPARATION").is_some() {
+        survey_separation(&seeds);
+        return;
+    }
     let presets: Vec<String> = std::env::var("VESSELHEX_TREE_PRESETS")
         .unwrap_or_else(|_| "coarse".to_string())
         .split(',')

@@ -7,6 +7,7 @@ use super::centerline::{sample_at, PathBuilder, Sample};
 use super::layout::{taper_profile, Hairpin, Layout, PlaceSpec, SteeredPass};
 use super::model::{vessel_pieces, Finish, Piece, Vessel, Zone};
 use super::rng::SeededRng;
+use super::separation::junction_reach;
 use nalgebra::Vector3;
 
 /// Blend widths of a junction in cells, at least and at most: the cubic blend fuses walls
@@ -44,7 +45,8 @@ impl Layout {
         i: usize,
     ) -> Option<usize> {
         let k = self.blend_width(radius);
-        let Some(stretch) = self.junction_stretch(anchor, &direction, radius, k, siblings) else { return None };
+        let stretch = self.junction_stretch(anchor, &direction, radius, k, siblings)?;
+        let reach = junction_reach(anchor.r, radius, k, self.gap_min, direction.angle(&anchor.t));
         let mut partners = vec![host];
         partners.extend_from_slice(siblings);
         let taper = rng.range(0.0, 0.3);
@@ -75,7 +77,8 @@ impl Layout {
             let floor = self.floor();
             let samples = b.finish(|s| taper_profile(s, body_start, body_end, radius, taper, floor));
             let id = self.vessels.len();
-            let Some(zone) = self.contact_zone(id, &samples, &partners, k, stretch, anchor) else { continue };
+            let bound = stretch.min(reach);
+            let Some(zone) = self.contact_zone(id, &samples, &partners, k, bound, anchor) else { continue };
             let body = (zone_end(&samples, &zone).max(stretch) + radius, body_end);
             let vessel = Vessel {
                 parent: Some(host),
@@ -88,6 +91,7 @@ impl Layout {
                 tortuosity,
                 body,
                 busy: Vec::new(),
+                reach,
             };
             if !self.clear(id, &vessel) {
                 continue;
@@ -128,8 +132,11 @@ impl Layout {
 
     /// The daughter's blend zone: the segment from its anchor to the last point of its
     /// centerline whose wall comes within the blend and the gap of a partner's; `None` when that
-    /// point lies past the straight stretch out of the junction (the daughter runs along a
-    /// partner, or comes back to it), when it touches a sibling after having parted from it
+    /// point lies past `reach_along` along it (the straight stretch out of the junction, and never
+    /// past its junction reach: the daughter runs along a partner, or comes back to it), when
+    /// the point it comes that close to lies more than `reach_along` along its host from the anchor or
+    /// past a sibling's own junction reach (it runs along the host, or along a sibling that has
+    /// left the junction), when it touches a sibling after having parted from it
     /// somewhere outside their host's lumen, or its host at places not joined along the host
     /// to its anchor (across a bend): each would close a loop around a hole (a handle).
     fn contact_zone(
@@ -138,7 +145,7 @@ impl Layout {
         samples: &[Sample],
         partners: &[usize],
         k: f64,
-        stretch: f64,
+        reach_along: f64,
         anchor: &Sample,
     ) -> Option<Zone> {
         let reach = self.gap_min + k;
@@ -164,6 +171,14 @@ impl Layout {
                     }
                     if c.gap < reach {
                         last_contact = last_contact.max(c.sp);
+                        let beyond = if slot == 0 {
+                            (c.sq - anchor.s).abs() > reach_along
+                        } else {
+                            c.sq > self.vessels[other.comp].reach
+                        };
+                        if beyond {
+                            return None;
+                        }
                         if slot == 0 {
                             on_host.push(c.sq);
                         }
@@ -193,7 +208,7 @@ impl Layout {
             }
         }
         let radius = samples[0].r;
-        if last_contact > stretch {
+        if last_contact > reach_along {
             return None;
         }
         // The host's wall it touches: one stretch along the host around the anchor (contact

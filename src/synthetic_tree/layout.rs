@@ -254,6 +254,7 @@ impl Layout {
             tortuosity,
             body: (body_start + radius, body_end),
             busy: Vec::new(),
+            reach: 0.0,
         };
         let id = self.commit_vessel(vessel, capped, bend);
         self.stenosis_on_new_vessel(rng, id);

@@ -48,8 +48,12 @@
 //!   of the vessel's radius) on a vessel's side.
 //! * Ends: all open (0.5), all capped flat (0.3) or each capped with probability 1/2 (0.2).
 //!
-//! A draw that would bring two walls closer than two cells without blending them (or the wall
-//! of a junction's daughter along its host past the junction) is drawn again, so the laid
+//! A draw that would bring two walls closer than two cells without blending them is drawn
+//! again, and so is a daughter whose wall touches its host's or a sibling's past its junction
+//! reach (where, at its branch angle, its wall has cleared its host's by the blend and the gap:
+//! [`separation::junction_reach`]), or a sibling's past that sibling's reach: the truth's
+//! junctions are then the only places where walls meet ([`separation::fused_runs`] measures
+//! it on any tree). So the laid
 //! distributions are the drawn ones thinned where the tree is crowded: `cargo bench --bench
 //! trees` prints the laid bins over seeds 1-200.
 
@@ -60,6 +64,7 @@ pub mod layout;
 pub mod lumen;
 pub mod model;
 pub mod rng;
+pub mod separation;
 pub mod truth;
 
 use crate::error::{Error, Result};

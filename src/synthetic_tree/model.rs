@@ -71,6 +71,10 @@ pub struct Vessel {
     pub body: (f64, f64),
     /// Arc-length intervals already taken (places, hairpins, stenoses, sacs).
     pub busy: Vec<(f64, f64)>,
+    /// Length along it, from its anchor, of its junction blend zone: the only part of it that
+    /// may touch its host or its siblings ([`super::separation::junction_reach`]; 0 for the
+    /// root).
+    pub reach: f64,
 }
 
 impl Vessel {
@@ -325,6 +329,7 @@ mod tests {
             tortuosity: 0.0,
             body: (0.0, 10.0),
             busy: vec![(2.0, 5.0)],
+            reach: 0.0,
         };
         for i in 0..=100 {
             let s = v.free_position(1.0, 0.5, i as f64 / 100.0).unwrap();

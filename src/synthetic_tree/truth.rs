@@ -19,7 +19,7 @@ use serde::Serialize;
 use std::path::PathBuf;
 
 /// Version of the generator: a tree is the same tree for a seed within a version.
-pub const GENERATOR_VERSION: u32 = 1;
+pub const GENERATOR_VERSION: u32 = 2;
 
 fn xyz(p: &Point3<f64>) -> [f64; 3] {
     [p.x, p.y, p.z]
