@@ -183,8 +183,9 @@ fn ends_differ(run: &Run, reference: &Run) -> Option<String> {
 /// (their own refusals), or the input and the centerlines (everything else: ends, their
 /// number and places, the surface's reading).
 pub fn stage_of(cause: &str) -> &'static str {
-    const SECTIONS: [&str; 9] = [
+    const SECTIONS: [&str; 10] = [
         "cannot be ordered around a common axis",
+        "lies behind the junction's folded end",
         "rays miss",
         "is clear of the other branches",
         "at most 5 can share one junction",

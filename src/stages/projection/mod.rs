@@ -704,6 +704,8 @@ const FAR_END_MARGIN: f64 = 1.5;
 /// Least distance between a junction's last ordinary section and a vessel end, in radii.
 const OUTLET_KEEP: f64 = 0.25;
 /// How far the folded end's wall points must lie ahead of the last ordinary section, in radii.
+/// Merely ahead is not enough: two mutated arches whose best sections had the fold 0.06 and
+/// 0.99 mm ahead (0.08 and 0.21 radii) gave 406 and 400 inverted junction elements.
 const FOLD_MARGIN: f64 = 0.25;
 /// Largest curvature of the centerline where ordinary sections may stand, times the radius
 /// (a radius of curvature of two vessel radii).
@@ -768,11 +770,12 @@ pub fn clear_transition_length(
     // crotches and the spine's ends) must lie ahead of the last ordinary section, or the
     // transition would run backwards there and fold over itself.
     let fold_wall = geometry.fold_wall(slot);
-    let fold_ahead = |d: f64| {
+    let fold_clearance = |d: f64| {
         let st = at(d);
         let towards = if at_start { -st.frame.tangent } else { st.frame.tangent };
-        fold_wall.iter().all(|w| (w - st.point).dot(&towards) >= FOLD_MARGIN * r)
+        fold_wall.iter().map(|w| (w - st.point).dot(&towards)).fold(f64::INFINITY, f64::min)
     };
+    let fold_ahead = |d: f64, margin: f64| fold_clearance(d) >= margin * r;
     // The geometric test first: it costs nothing next to twelve sets of rays.
     let clear = |d: f64, max_bend: f64| {
         let base = at(d);
@@ -795,24 +798,24 @@ pub fn clear_transition_length(
     // clear. A branch that curls back past the junction's level (palabos_cerebral_aneurysm: an
     // outlet leaving a sac 14 mm in radius turns back down by 30 mm) puts the spine's ends
     // behind its later sections, which asked of them too left no section anywhere.
-    let last_section = |d: f64, max_bend: f64| {
-        fold_ahead(d)
+    let last_section = |d: f64, max_bend: f64, margin: f64| {
+        fold_ahead(d, margin)
             && (0..=CLEAR_RUN_STEPS)
                 .map(|k| d + k as f64 * step)
                 .filter(|&x| x == d || x <= run_reach)
                 .all(|x| clear(x, max_bend))
     };
-    let search = |max_bend: f64| {
+    let search = |max_bend: f64, margin: f64| {
         let mut d = estimate;
         while d < estimate + CLEAR_SEARCH * r && before_far_end(d) && d <= reach {
-            if last_section(d, max_bend) {
+            if last_section(d, max_bend, margin) {
                 return Some(d);
             }
             d += step;
         }
         None
     };
-    if let Some(d) = search(MAX_BEND) {
+    if let Some(d) = search(MAX_BEND, FOLD_MARGIN) {
         return Ok(Some(d));
     }
     // Between two junctions, no clear section in this junction's half: the branch is a bridge.
@@ -824,7 +827,7 @@ pub fn clear_transition_length(
     // So may a sac's, when no section clears the junction between the estimate and its end.
     let mut d = reach;
     while setup.steep_short_branches && (estimate > reach || sac) && d >= NEAREST_SECTION * r {
-        if last_section(d, MAX_BEND) {
+        if last_section(d, MAX_BEND, FOLD_MARGIN) {
             return Ok(Some(d));
         }
         d -= step;
@@ -832,9 +835,46 @@ pub fn clear_transition_length(
     // A bend tighter than the gentle one just past the junction, and the fold behind the
     // sections beyond it (a branch curling back): the bend that stops sections crossing inside
     // the lumen will do, and the elements decide.
-    if let Some(d) = search(MAX_BEND_UNCROSSED) {
+    if let Some(d) = search(MAX_BEND_UNCROSSED, FOLD_MARGIN) {
         return Ok(Some(d));
     }
+    let candidates = (0..).map(|k| estimate + k as f64 * step).take_while(|&x| before_far_end(x) && x <= reach);
+    let searched = Searched {
+        length: len,
+        sac,
+        estimate,
+        reach,
+        searched_to: d,
+        fold_clearance: candidates.map(fold_clearance).fold(f64::NEG_INFINITY, f64::max),
+        end: at(len),
+    };
+    Err(no_last_section(setup, branch, geometry, r, &searched))
+}
+
+/// What [`clear_transition_length`] searched, for the refusal when no section will do.
+struct Searched {
+    length: f64,
+    sac: bool,
+    /// The geometric estimate of the transition's length, and how far the last section may lie.
+    estimate: f64,
+    reach: f64,
+    searched_to: f64,
+    /// The most the fold's wall points lay ahead of any candidate section (mm).
+    fold_clearance: f64,
+    end: CenterlineSample,
+}
+
+/// Why no last ordinary section of a branch will do at a junction: a sac opening too close, a
+/// branch too short for the transition, the fold reaching past every section, or no section
+/// clear of the other branches.
+fn no_last_section(
+    setup: &ProjectionSetup,
+    branch: &Branch,
+    geometry: &JunctionGeometry,
+    r: f64,
+    s: &Searched,
+) -> Error {
+    let Searched { length: len, estimate, reach, searched_to: d, fold_clearance: best_clearance, .. } = *s;
     let place = format!(
         "{}: branch {} ({len:.1} mm long) at the junction at ({:.3}, {:.3}, {:.3}) mm",
         setup.surface.source.display(),
@@ -843,35 +883,46 @@ pub fn clear_transition_length(
         geometry.centre.y,
         geometry.centre.z
     );
-    if sac {
+    if s.sac {
         // The sac's far end is its dome, not an opening a longer stretch of surface would move.
-        let end = at(len).point;
-        return Err(Error::ShortBranch {
+        return Error::ShortBranch {
             message: format!(
                 "{place}: the sac cannot be meshed as a blind branch closed by a dome: no cross-section of the branch \
                  up to the centre of the sac's largest ball ({len:.2} mm from the junction, radius {:.2} mm) lies \
                  past the junction's folded end and clear of the other branches (the junction's transition needs \
                  {estimate:.2} mm): the sac opens too close to the junction",
-                at(len).radius
+                s.end.radius
             ),
-            end_mm: end.into(),
-        });
+            end_mm: s.end.point.into(),
+        };
     }
     if estimate > reach {
-        let end = at(len).point;
-        return Err(Error::ShortBranch {
+        return Error::ShortBranch {
             message: format!(
                 "{place}: the junction's transition needs {estimate:.1} mm of it, more than the branch leaves before \
                  its end ({reach:.1} mm): the branch ends too close to the junction. Mesh a longer stretch of the vessel"
             ),
-            end_mm: end.into(),
-        });
+            end_mm: s.end.point.into(),
+        };
     }
-    Err(Error::Geometry(format!(
+    // The fold lying ahead of every candidate section, named when it is what no candidate met.
+    if best_clearance.is_finite() && best_clearance < FOLD_MARGIN * r {
+        return Error::Geometry(format!(
+            "{place}: no cross-section of the branch up to {reach:.1} mm from the junction lies behind the \
+             junction's folded end (laid out as {}): where its pages or sectors meet the wall lies at best \
+             {best_clearance:.2} mm ahead of a section, {:.2} mm ({FOLD_MARGIN} radii) are needed. The fold spans the \
+             junction along this branch: a branch leaving out of the others' plane, or bending within its first \
+             radii. Give the surface a longer stretch of this branch, or cut the smallest branches at this junction \
+             off the surface",
+            if geometry.arrangement_name() == "book" { "a book" } else { "sectors" },
+            FOLD_MARGIN * r
+        ));
+    }
+    Error::Geometry(format!(
         "{place}: no cross-section within {d:.1} mm of the junction is clear of the other branches (every ray \
          meeting this branch's wall within {CLEAR_REACH} radii, on a gently bending centerline, behind the \
          junction's crotches). The branch may be too short, or its centerline leaves the lumen near the junction"
-    )))
+    ))
 }
 
 /// Largest share of the way from a transition section's centre to its wall that the core
