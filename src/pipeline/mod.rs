@@ -301,11 +301,30 @@ pub fn mesh_vessel(
     config: &MeshConfig,
     progress: &mut Progress,
 ) -> Result<Meshed> {
+    mesh_vessel_on(surface, None, centerlines, config, progress)
+}
+
+/// [`mesh_vessel`] on `index`, the surface's index when it was built already: the retries of
+/// [`policy::mesh_dropping_what_fails`] share one, and what it has learnt (its winding numbers).
+pub(crate) fn mesh_vessel_on(
+    surface: &TriangleSurface,
+    index: Option<&LumenSurface>,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    progress: &mut Progress,
+) -> Result<Meshed> {
     checks::check_settings(config)?;
     progress.stage("surface index");
-    let lumen_surface = LumenSurface::new(surface)?;
-    checks::check_centerline_file(&lumen_surface, centerlines)?;
-    policy::books_then_sectors(surface, &lumen_surface, centerlines, config, progress)
+    let built;
+    let lumen_surface = match index {
+        Some(index) => index,
+        None => {
+            built = LumenSurface::new(surface)?;
+            &built
+        }
+    };
+    checks::check_centerline_file(lumen_surface, centerlines)?;
+    policy::books_then_sectors(surface, lumen_surface, centerlines, config, progress)
 }
 
 /// Meshes a vessel from its indexed surface and its centerline tree (both in mm).

@@ -24,7 +24,7 @@ use crate::geometry::surface::{LumenSurface, TriangleSurface};
 use crate::io::input::Centerlines;
 use crate::pipeline::checks::name_winding;
 use crate::pipeline::progress::Progress;
-use crate::pipeline::{mesh_tree, mesh_vessel};
+use crate::pipeline::{mesh_tree, mesh_vessel_on};
 use crate::stages::annotation::Meshed;
 use crate::stages::centerline::{CenterlineTree, ForcedMerge};
 use crate::stages::junction::{analyse_junctions, find_junction_overlap, unanalysable_close_junction, LayoutPolicy};
@@ -78,14 +78,17 @@ pub(crate) fn mesh_dropping_what_fails(
     progress: &mut Progress,
 ) -> Result<(Meshed, Centerlines, Vec<([f64; 3], String)>)> {
     let mut short_branches = vec![];
-    let attempt = mesh_vessel(surface, &centerlines, tree_config, progress);
+    // The surface indexed once for every attempt (else each indexes it, and fails, as the first).
+    let index = LumenSurface::new(surface).ok();
+    let index = index.as_ref();
+    let attempt = mesh_vessel_on(surface, index, &centerlines, tree_config, progress);
     let (meshed, centerlines) = match attempt {
         Ok(meshed) => (meshed, centerlines),
         // Sacs found on the surface never cost the vessel: refused with them, it is meshed
         // without the one that fails (or all), and each left out is said not meshed (a warning,
         // report.json's ends, exit 3).
         Err(e) if extracted && !tree_config.centerline.sacs_mm.is_empty() => {
-            mesh_leaving_out_sacs(surface, centerlines, tree_config, &e, warnings, progress)?
+            mesh_leaving_out_sacs(surface, index, centerlines, tree_config, &e, warnings, progress)?
         }
         // A branch found on the surface that ends too close to its junction for the junction's
         // transition (a short capped stub in an aorto-iliac's crotch) does not cost the rest: the
@@ -94,8 +97,8 @@ pub(crate) fn mesh_dropping_what_fails(
         Err(Error::ShortBranch { message, end_mm }) if extracted && centerlines.polylines.len() > 2 => {
             let centerlines = without_paths_to(&centerlines, &[end_mm]);
             short_branches.push((end_mm, message));
-            let meshed =
-                mesh_vessel(surface, &centerlines, tree_config, progress).map_err(|e| name_winding(e, surface))?;
+            let meshed = mesh_vessel_on(surface, index, &centerlines, tree_config, progress)
+                .map_err(|e| name_winding(e, surface))?;
             (meshed, centerlines)
         }
         Err(e) => return Err(name_winding(e, surface)),
@@ -110,6 +113,7 @@ pub(crate) fn mesh_dropping_what_fails(
 /// each sac left out and the refusal with it. Returns the mesh and its centerlines.
 fn mesh_leaving_out_sacs(
     surface: &TriangleSurface,
+    index: Option<&LumenSurface>,
     centerlines: Centerlines,
     tree_config: &MeshConfig,
     refusal: &Error,
@@ -125,7 +129,7 @@ fn mesh_leaving_out_sacs(
         for (k, sac) in sacs.iter().enumerate() {
             let kept: Vec<[f64; 3]> = sacs.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, p)| *p).collect();
             let without = without_paths_to(&centerlines, &[*sac]);
-            if let Ok(meshed) = mesh_vessel(surface, &without, &keeping(kept), progress) {
+            if let Ok(meshed) = mesh_vessel_on(surface, index, &without, &keeping(kept), progress) {
                 let [x, y, z] = *sac;
                 warnings.push(Warning::new(
                     "sac_not_meshed",
@@ -141,11 +145,12 @@ fn mesh_leaving_out_sacs(
     warnings
         .push(Warning::new("sac_not_meshed", format!("the vessel is meshed without its sac(s); with them: {refusal}")));
     let without = without_paths_to(&centerlines, sacs);
-    let meshed = mesh_vessel(surface, &without, &keeping(vec![]), progress).map_err(|e| name_winding(e, surface))?;
+    let meshed =
+        mesh_vessel_on(surface, index, &without, &keeping(vec![]), progress).map_err(|e| name_winding(e, surface))?;
     Ok((meshed, without))
 }
 
-/// [`mesh_vessel`] with the junctions' arrangements `policy` allows.
+/// [`crate::pipeline::mesh_vessel`] with the junctions' arrangements `policy` allows.
 pub(super) fn mesh_vessel_laid_out(
     surface: &TriangleSurface,
     lumen_surface: &LumenSurface,
@@ -249,7 +254,7 @@ pub(super) const COARSE_JUNCTION_SPACING: f64 = 0.5;
 
 /// The settings with a branched vessel's junction transitions and bridges spaced at the coarse
 /// preset's spacing (the rest as asked), when they ask a finer spacing relative to the radius
-/// and none for the junctions; None otherwise. [`mesh_vessel`] meshes with them a vessel whose
+/// and none for the junctions; None otherwise. [`crate::pipeline::mesh_vessel`] meshes with them a vessel whose
 /// junctions were merged (their transitions sweep between two junctions' folds over a spine up
 /// to twice as long) and one refused with the settings as given. A transition's sections are
 /// swept between curved folds, not cut by planes, and thin ones cross each other:
