@@ -182,10 +182,12 @@ fn ends_differ(run: &Run, reference: &Run) -> Option<String> {
 /// Where a failure's cause lies, from its message: the junction mesher and the cross-sections
 /// (their own refusals), or the input and the centerlines (everything else: ends, their
 /// number and places, the surface's reading).
+/// `cause` is shortened (see [`shorten`]), so each fragment is one that comes early in its message.
 pub fn stage_of(cause: &str) -> &'static str {
-    const SECTIONS: [&str; 10] = [
+    const SECTIONS: [&str; 11] = [
         "cannot be ordered around a common axis",
-        "lies behind the junction's folded end",
+        "in the junction at (",
+        "no cross-section of the branch up to",
         "rays miss",
         "is clear of the other branches",
         "at most 5 can share one junction",
