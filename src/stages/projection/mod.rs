@@ -775,7 +775,7 @@ pub fn clear_transition_length(
         let towards = if at_start { -st.frame.tangent } else { st.frame.tangent };
         fold_wall.iter().map(|w| (w - st.point).dot(&towards)).fold(f64::INFINITY, f64::min)
     };
-    let fold_ahead = |d: f64, margin: f64| fold_clearance(d) >= margin * r;
+    let fold_ahead = |d: f64| fold_clearance(d) >= FOLD_MARGIN * r;
     // The geometric test first: it costs nothing next to twelve sets of rays.
     let clear = |d: f64, max_bend: f64| {
         let base = at(d);
@@ -798,24 +798,24 @@ pub fn clear_transition_length(
     // clear. A branch that curls back past the junction's level (palabos_cerebral_aneurysm: an
     // outlet leaving a sac 14 mm in radius turns back down by 30 mm) puts the spine's ends
     // behind its later sections, which asked of them too left no section anywhere.
-    let last_section = |d: f64, max_bend: f64, margin: f64| {
-        fold_ahead(d, margin)
+    let last_section = |d: f64, max_bend: f64| {
+        fold_ahead(d)
             && (0..=CLEAR_RUN_STEPS)
                 .map(|k| d + k as f64 * step)
                 .filter(|&x| x == d || x <= run_reach)
                 .all(|x| clear(x, max_bend))
     };
-    let search = |max_bend: f64, margin: f64| {
+    let search = |max_bend: f64| {
         let mut d = estimate;
         while d < estimate + CLEAR_SEARCH * r && before_far_end(d) && d <= reach {
-            if last_section(d, max_bend, margin) {
+            if last_section(d, max_bend) {
                 return Some(d);
             }
             d += step;
         }
         None
     };
-    if let Some(d) = search(MAX_BEND, FOLD_MARGIN) {
+    if let Some(d) = search(MAX_BEND) {
         return Ok(Some(d));
     }
     // Between two junctions, no clear section in this junction's half: the branch is a bridge.
@@ -827,7 +827,7 @@ pub fn clear_transition_length(
     // So may a sac's, when no section clears the junction between the estimate and its end.
     let mut d = reach;
     while setup.steep_short_branches && (estimate > reach || sac) && d >= NEAREST_SECTION * r {
-        if last_section(d, MAX_BEND, FOLD_MARGIN) {
+        if last_section(d, MAX_BEND) {
             return Ok(Some(d));
         }
         d -= step;
@@ -835,7 +835,7 @@ pub fn clear_transition_length(
     // A bend tighter than the gentle one just past the junction, and the fold behind the
     // sections beyond it (a branch curling back): the bend that stops sections crossing inside
     // the lumen will do, and the elements decide.
-    if let Some(d) = search(MAX_BEND_UNCROSSED, FOLD_MARGIN) {
+    if let Some(d) = search(MAX_BEND_UNCROSSED) {
         return Ok(Some(d));
     }
     let candidates = (0..).map(|k| estimate + k as f64 * step).take_while(|&x| before_far_end(x) && x <= reach);
