@@ -355,19 +355,12 @@ fn mesh_without_centerlines_through_the_cli() {
 #[test]
 fn the_mesh_starts_at_the_inlet_the_extraction_chose() {
     use vesselhex::centerline_extract::InletChoice;
-    use vesselhex::config::{MeshConfig, Preset};
-    use vesselhex::pipeline::{mesh_surface, CenterlineSource, MeshSettings};
+    use vesselhex::pipeline::{mesh_surface, CenterlineSource};
     let (y, _) = fixture("y_bifurcation");
     let surface = read_surface(&y, LengthUnit::Mm).unwrap();
     let daughter = Point3::new(7.57, 0.0, 13.11);
     let options = ExtractOptions { inlet: InletChoice::Nearest(daughter), ..Default::default() };
-    let settings = MeshSettings {
-        config: MeshConfig::preset(Preset::Coarse),
-        centerline_units: None,
-        max_memory: vesselhex::io::memory::default_max_memory(),
-        warnings: vec![],
-        caps: vec![],
-    };
+    let settings = common::coarse_settings();
     let vessel = mesh_surface(surface, CenterlineSource::Extract(options), settings, &mut Progress::new(true, 9))
         .unwrap_or_else(|e| panic!("{e}"));
     let inlet = vessel.ends[vessel.inlet];

@@ -183,17 +183,11 @@ fn a_sac_holding_a_junction_is_its_own_region() {
     use vesselhex::centerline_extract::ExtractOptions;
     use vesselhex::input::read_surface;
     use vesselhex::mesh::{face_nodes, FACE_INNER, FACE_OUTER};
-    use vesselhex::pipeline::{mesh_surface, CenterlineSource, MeshSettings};
+    use vesselhex::pipeline::{mesh_surface, CenterlineSource};
     use vesselhex::units::LengthUnit;
     let Some(vessels) = common::vessels_dir() else { return };
     let surface = read_surface(&vessels.join("palabos_cerebral_aneurysm/aneurysm.stl"), LengthUnit::M).unwrap();
-    let settings = MeshSettings {
-        config: MeshConfig::preset(Preset::Coarse),
-        centerline_units: None,
-        max_memory: vesselhex::io::memory::default_max_memory(),
-        warnings: vec![],
-        caps: vec![],
-    };
+    let settings = common::coarse_settings();
     let vessel = mesh_surface(
         surface,
         CenterlineSource::Extract(ExtractOptions::default()),

@@ -6,24 +6,12 @@ mod common;
 
 use common::temp_dir;
 use nalgebra::Point3;
+use vesselhex::accuracy::meshed_lumen_surface;
 use vesselhex::centerline_extract::ExtractOptions;
-use vesselhex::config::{MeshConfig, Preset};
-use vesselhex::mesh::{face_nodes, sets, Region};
-use vesselhex::pipeline::{mesh_surface, CenterlineSource, MeshSettings};
+use vesselhex::mesh::Region;
+use vesselhex::pipeline::{mesh_surface, CenterlineSource};
 use vesselhex::progress::Progress;
-use vesselhex::surface::LumenSurface;
 use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
-
-/// The meshed lumen surface as triangles (each wall quad split along its shorter diagonal).
-fn meshed_lumen_surface(mesh: &vesselhex::mesh::VesselMesh) -> LumenSurface {
-    let mut tris = vec![];
-    for f in &mesh.face_sets[sets::LUMEN_WALL_FACES] {
-        let q = face_nodes(&mesh.hexes[f.element as usize], f.face as usize);
-        tris.push([q[0], q[1], q[2]]);
-        tris.push([q[0], q[2], q[3]]);
-    }
-    LumenSurface::from_parts(mesh.nodes.clone(), tris, "meshed lumen".into()).unwrap()
-}
 
 /// Random trees 31 (a 73 % stenosis whose throat sits at the plaque's side, eccentricity 0.98)
 /// and 51 (87 %, eccentricity 0.36), two ends each: both were refused ("the cross-section ...
@@ -45,17 +33,10 @@ fn tight_and_eccentric_stenoses_mesh_and_follow_the_narrowing() {
             Point3::new(number(&stenosis["centre"][0]), number(&stenosis["centre"][1]), number(&stenosis["centre"][2]));
         let reference = number(&stenosis["reference_radius_mm"]);
         let surface = vesselhex::input::read_surface(&written.surface, vesselhex::units::LengthUnit::Mm).unwrap();
-        let settings = MeshSettings {
-            config: MeshConfig::preset(Preset::Coarse),
-            centerline_units: None,
-            max_memory: vesselhex::io::memory::default_max_memory(),
-            warnings: vec![],
-            caps: vec![],
-        };
         let vessel = mesh_surface(
             surface.clone(),
             CenterlineSource::Extract(ExtractOptions::default()),
-            settings,
+            common::coarse_settings(),
             &mut Progress::new(true, 0),
         )
         .unwrap_or_else(|e| panic!("tree {seed}: {e}"));
@@ -65,7 +46,7 @@ fn tight_and_eccentric_stenoses_mesh_and_follow_the_narrowing() {
         assert!(min_sj >= 0.2, "tree {seed}: min scaled Jacobian {min_sj}");
         let lumen = mesh.region_range(Region::Lumen).count();
         assert!(lumen > 0, "tree {seed}: no lumen elements");
-        let meshed = meshed_lumen_surface(mesh);
+        let meshed = meshed_lumen_surface(mesh).unwrap();
         let near: Vec<&Point3<f64>> =
             surface.vertices.iter().filter(|v| (*v - throat).norm() <= 1.5 * reference).collect();
         assert!(near.len() > 50, "tree {seed}: {} vertices near the throat", near.len());

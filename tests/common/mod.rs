@@ -75,6 +75,17 @@ pub fn mesh_surface_cli(surface: &Path, out: &Path, extra: &[&str]) -> serde_jso
     serde_json::from_str(&text).unwrap()
 }
 
+/// The settings `vesselhex mesh --preset coarse` meshes with, nothing else asked.
+pub fn coarse_settings() -> vesselhex::pipeline::MeshSettings {
+    vesselhex::pipeline::MeshSettings {
+        config: vesselhex::config::MeshConfig::preset(vesselhex::config::Preset::Coarse),
+        centerline_units: None,
+        max_memory: vesselhex::io::memory::default_max_memory(),
+        warnings: vec![],
+        caps: vec![],
+    }
+}
+
 /// The committed fixtures.
 pub fn fixtures_dir() -> PathBuf {
     crate_dir().join("fixtures")

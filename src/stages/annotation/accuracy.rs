@@ -81,16 +81,9 @@ pub fn node_distances(mesh: &VesselMesh, surface: &LumenSurface) -> Vec<f64> {
         .collect()
 }
 
-pub fn surface_accuracy(
-    mesh: &VesselMesh,
-    surface: &LumenSurface,
-    branches: &[Branch],
-    projected: &[ProjectedBranch],
-) -> Result<SurfaceAccuracy> {
-    let node_d = node_distances(mesh, surface);
-
-    // The meshed lumen surface as triangles, over its own nodes only (a copy of every node of
-    // the mesh was 190 MB at 10 M hexes).
+/// The meshed lumen surface as triangles (each wall quadrilateral split along its shorter
+/// diagonal), over its own nodes only: a copy of every node of the mesh was 190 MB at 10 M hexes.
+pub fn meshed_lumen_surface(mesh: &VesselMesh) -> Result<LumenSurface> {
     let mut local = std::collections::HashMap::new();
     let mut vertices = Vec::new();
     let mut index = |n: u32| -> u32 {
@@ -112,7 +105,18 @@ pub fn surface_accuracy(
             tris.push([q[1], q[2], q[3]]);
         }
     }
-    let meshed = LumenSurface::from_parts(vertices, tris, "meshed lumen surface".into())?;
+    LumenSurface::from_parts(vertices, tris, "meshed lumen surface".into())
+}
+
+pub fn surface_accuracy(
+    mesh: &VesselMesh,
+    surface: &LumenSurface,
+    branches: &[Branch],
+    projected: &[ProjectedBranch],
+) -> Result<SurfaceAccuracy> {
+    let node_d = node_distances(mesh, surface);
+
+    let meshed = meshed_lumen_surface(mesh)?;
 
     // Input vertices inside the meshed part: their nearest centerline sample (over every
     // branch) lies within the meshed stretch of its branch, and they lie on the inner side of
