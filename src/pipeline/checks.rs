@@ -5,6 +5,7 @@
 use crate::data::config::MeshConfig;
 use crate::data::diagnostics::{short, Warning};
 use crate::data::error::{Error, Result};
+use crate::data::region::Region;
 use crate::data::units::LengthUnit;
 use crate::geometry::mesh::VesselMesh;
 use crate::geometry::surface::{LumenSurface, TriangleSurface};
@@ -342,6 +343,17 @@ pub(super) fn refuse_inverted(
 ) -> Result<()> {
     let inverted = |q: f64| q.is_nan() || q <= 0.0;
     let count = mesh.quality.iter().filter(|q| inverted(q.scaled_jacobian)).count();
+    // By region: a fold of the lumen's blocks inverts lumen and wall alike; a wall grown across
+    // a crotch sharper than its thickness inverts the wall only.
+    let by_region: Vec<String> = Region::ALL
+        .iter()
+        .map(|&r| {
+            let n =
+                mesh.quality.iter().zip(&mesh.regions).filter(|(q, &g)| g == r && inverted(q.scaled_jacobian)).count();
+            format!("{n} {}", r.name())
+        })
+        .collect();
+    let by_region = by_region.join(", ");
     let rank = |q: f64| if q.is_nan() { f64::NEG_INFINITY } else { q };
     if let Some((e, q)) = mesh
         .quality
@@ -365,7 +377,7 @@ pub(super) fn refuse_inverted(
         };
         return Err(Error::Geometry(format!(
             "{}: element {} ({}) near ({:.3}, {:.3}, {:.3}) mm{place} is inverted (scaled Jacobian {:.3}; {count} \
-             inverted in all): {cause}",
+             inverted in all: {by_region}): {cause}",
             surface.source.display(),
             e + 1,
             mesh.regions[e].name(),

@@ -15,7 +15,7 @@ use crate::stages::centerline::{Branch, CenterlineSample};
 use crate::stages::junction::blocks::SectionTemplate;
 use crate::stages::junction::{transition_points, FoldEnd, JunctionGeometry, TransitionPoints};
 use crate::stages::projection::end_planes::EndCaps;
-use nalgebra::{Point3, Vector2, Vector3};
+use nalgebra::{Point3, Rotation3, Vector2, Vector3};
 use rayon::prelude::*;
 
 mod cut;
@@ -1289,27 +1289,54 @@ fn bridge(
     let centre = curve(start.geometry.centre, end.geometry.centre, &Vector2::zeros());
     let length = branch.length();
     let cells = ((length / (setup.junction_spacing)(station)).round() as usize).max(2);
+    // The straight sweep first; where it leaves the lumen (the branch bows out, or turns back
+    // through a wide junction), the same sweep carried along the branch's own centerline.
+    let attempt = |follow: bool| -> Result<Vec<ProjectedSection>> {
+        (1..cells)
+            .map(|i| {
+                let v = i as f64 / cells as f64;
+                let place = |q: Point3<f64>| if follow { onto_centerline(branch, &centre, v, q) } else { q };
+                let p = TransitionPoints {
+                    core: cores.iter().map(|c| place(on_guide(c, v))).collect(),
+                    targets: vec![],
+                    centre: place(on_guide(&centre, v)),
+                };
+                let guide_at: Vec<Point3<f64>> = guides.iter().map(|c| place(on_guide(c, v))).collect();
+                let sample = CenterlineSample {
+                    s: v * length,
+                    point: p.centre,
+                    radius: start.geometry.radius + (end.geometry.radius - start.geometry.radius) * v,
+                    frame: station.frame,
+                };
+                let (probe, section) = guided_section(p, &guide_at, sample, start, setup);
+                if !probe.valid() {
+                    return Err(transition_failure(setup, branch, start.geometry, v, &probe));
+                }
+                Ok(section)
+            })
+            .collect()
+    };
+    let inner = attempt(false).or_else(|first| attempt(true).map_err(|_| first))?;
     let mut out = vec![up.fold];
-    for i in 1..cells {
-        let v = i as f64 / cells as f64;
-        let p = TransitionPoints {
-            core: cores.iter().map(|c| on_guide(c, v)).collect(),
-            targets: vec![],
-            centre: on_guide(&centre, v),
-        };
-        let guide_at: Vec<Point3<f64>> = guides.iter().map(|c| on_guide(c, v)).collect();
-        let sample = CenterlineSample {
-            s: v * length,
-            point: p.centre,
-            radius: start.geometry.radius + (end.geometry.radius - start.geometry.radius) * v,
-            frame: station.frame,
-        };
-        let (probe, section) = guided_section(p, &guide_at, sample, start, setup);
-        if !probe.valid() {
-            return Err(transition_failure(setup, branch, start.geometry, v, &probe));
-        }
-        out.push(section);
-    }
+    out.extend(inner);
     out.push(down.fold);
     Ok(out)
+}
+
+/// A point `q` of a bridge's straight sweep at parameter `v` (whose centre curve is `centre`),
+/// carried onto the branch's centerline: moved with the sweep's centre to the centerline's point
+/// at the same share of the branch, and turned as the sweep's direction turns onto the
+/// centerline's there. The centerline lies in the lumen wherever the straight chord between the
+/// junctions does not (a branch bowing out, or turning back through a wide junction: random trees
+/// 23, 30 and 32 had 7-9 of 16 rays of a bridge section outside the wall); at the two folds both
+/// curves meet the junctions' centres (the centerline's ends moved onto them, in proportion), so
+/// the bridge still ends on its folds.
+fn onto_centerline(branch: &Branch, centre: &GuideCurve, v: f64, q: Point3<f64>) -> Point3<f64> {
+    const STEP: f64 = 1e-4;
+    let length = branch.length();
+    let along = branch.at(v * length);
+    let ends_off = (centre.0 - branch.at(0.0).point) * (1.0 - v) + (centre.2 - branch.at(length).point) * v;
+    let sweep = on_guide(centre, (v + STEP).min(1.0)) - on_guide(centre, (v - STEP).max(0.0));
+    let turn = Rotation3::rotation_between(&sweep, &along.frame.tangent).unwrap_or_else(Rotation3::identity);
+    along.point + ends_off + turn * (q - on_guide(centre, v))
 }
