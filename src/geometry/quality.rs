@@ -46,6 +46,43 @@ pub fn scaled_jacobian(c: &[Point3<f64>; 8]) -> f64 {
 /// The scaled Jacobian when it is above `floor`; otherwise some value at most `floor`, found
 /// as soon as one corner reaches it (an optimiser that only asks "better than?" stops early).
 pub fn scaled_jacobian_unless_below(c: &[Point3<f64>; 8], floor: f64) -> f64 {
+    scaled_jacobian_unless_below_from(c, floor, &mut 0)
+}
+
+/// [`scaled_jacobian_unless_below`] measuring the term `hint` first (0 the centroid's, 1 + i
+/// corner i's; see [`scaled_jacobian_term`]) when a floor is given: an optimiser's trial move
+/// that fails mostly fails where the element was worst before, so it is known below the floor
+/// after one term instead of after the terms before it. Above the floor every term is measured
+/// in the same order, so the value is the same to the bit whatever the hint. `hint` is set to
+/// the term that decided: the one found below the floor, else the smallest.
+pub fn scaled_jacobian_unless_below_from(c: &[Point3<f64>; 8], floor: f64, hint: &mut u8) -> f64 {
+    if *hint != 0 && floor > f64::NEG_INFINITY {
+        let first = scaled_jacobian_term(c, *hint as usize);
+        if first <= floor {
+            return first;
+        }
+    }
+    let mut min = scaled_jacobian_term(c, 0);
+    let mut at = 0;
+    for term in 1..9 {
+        if min <= floor {
+            break;
+        }
+        let q = scaled_jacobian_term(c, term);
+        if q < min || (min.is_nan() && !q.is_nan()) {
+            at = term;
+        }
+        min = min.min(q);
+    }
+    *hint = at as u8;
+    min
+}
+
+/// One of the nine terms of the scaled Jacobian: the determinant of the three normalised
+/// principal axes at the centroid (`term` 0, differences of opposite face sums), or of the unit
+/// edges leaving corner `term - 1` in right-handed order.
+#[inline(always)]
+fn scaled_jacobian_term(c: &[Point3<f64>; 8], term: usize) -> f64 {
     let det_unit = |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>| {
         let lengths = [a.norm(), b.norm(), d.norm()];
         let (shortest, longest) =
@@ -56,19 +93,17 @@ pub fn scaled_jacobian_unless_below(c: &[Point3<f64>; 8], floor: f64) -> f64 {
             a.cross(&b).dot(&d) / (lengths[0] * lengths[1] * lengths[2])
         }
     };
-    let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
-    // principal axes at the centroid
-    let x1 = sum([1, 2, 5, 6]) - sum([0, 3, 4, 7]);
-    let x2 = sum([2, 3, 6, 7]) - sum([0, 1, 4, 5]);
-    let x3 = sum([4, 5, 6, 7]) - sum([0, 1, 2, 3]);
-    let mut min = det_unit(x1, x2, x3);
-    for (i, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
-        if min <= floor {
-            break;
-        }
-        min = min.min(det_unit(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i]));
+    if term == 0 {
+        let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
+        let x1 = sum([1, 2, 5, 6]) - sum([0, 3, 4, 7]);
+        let x2 = sum([2, 3, 6, 7]) - sum([0, 1, 4, 5]);
+        let x3 = sum([4, 5, 6, 7]) - sum([0, 1, 2, 3]);
+        det_unit(x1, x2, x3)
+    } else {
+        let i = term - 1;
+        let nb = HEX_CORNER_NEIGHBOURS[i];
+        det_unit(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i])
     }
-    min
 }
 
 /// Equi-angle skew of a hexahedron. The extreme angles are those of the extreme cosines (acos
@@ -189,9 +224,17 @@ pub enum Validity {
 impl Validity {
     /// The element's validity when it is above `floor`; otherwise some value at most `floor`.
     pub fn unless_below(self, c: &[Point3<f64>; 8], floor: f64) -> f64 {
+        self.unless_below_from(c, floor, &mut 0)
+    }
+
+    /// [`Self::unless_below`] with the scaled Jacobian's term `hint` measured first (see
+    /// [`scaled_jacobian_unless_below_from`]): the same value above the floor.
+    pub fn unless_below_from(self, c: &[Point3<f64>; 8], floor: f64, hint: &mut u8) -> f64 {
+        let sj = scaled_jacobian_unless_below_from(c, floor, hint);
         match self {
-            Validity::Corners => scaled_jacobian_unless_below(c, floor),
-            Validity::CornersAndPyramids => validity_unless_below(c, floor),
+            Validity::Corners => sj,
+            Validity::CornersAndPyramids if sj.is_nan() || sj <= floor => sj,
+            Validity::CornersAndPyramids => validity_from(sj, face_pyramid_ratio(c)),
         }
     }
 }
