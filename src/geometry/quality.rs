@@ -27,7 +27,7 @@ impl Bars {
     pub const MIN_FACE_PYRAMID: f64 = 0.0;
 }
 
-use crate::geometry::mesh::{ElementQuality, HEX_CORNER_NEIGHBOURS, HEX_FACES};
+use crate::geometry::mesh::{ElementQuality, HEX_CORNER_NEIGHBOURS, HEX_EDGES, HEX_FACES};
 use nalgebra::{Point3, Vector3};
 
 /// A corner whose shortest edge is at most this share of its longest counts as collapsed (scaled
@@ -46,29 +46,96 @@ pub fn scaled_jacobian(c: &[Point3<f64>; 8]) -> f64 {
 /// The scaled Jacobian when it is above `floor`; otherwise some value at most `floor`, found
 /// as soon as one corner reaches it (an optimiser that only asks "better than?" stops early).
 pub fn scaled_jacobian_unless_below(c: &[Point3<f64>; 8], floor: f64) -> f64 {
-    let det_unit = |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>| {
-        let lengths = [a.norm(), b.norm(), d.norm()];
-        let (shortest, longest) =
-            (lengths[0].min(lengths[1]).min(lengths[2]), lengths[0].max(lengths[1]).max(lengths[2]));
-        if shortest <= COLLAPSED_EDGE * longest || shortest <= f64::MIN_POSITIVE {
-            0.0
-        } else {
-            a.cross(&b).dot(&d) / (lengths[0] * lengths[1] * lengths[2])
+    scaled_jacobian_unless_below_from(c, floor, &mut 0)
+}
+
+/// [`scaled_jacobian_unless_below`] measuring the term `hint` first (0 the centroid's, 1 + i
+/// corner i's; see [`scaled_jacobian_term`]) when a floor is given: an optimiser's trial move
+/// that fails mostly fails where the element was worst before, so it is known below the floor
+/// after one term instead of after the terms before it. Above the floor every term is measured
+/// in the same order, so the value is the same to the bit whatever the hint. `hint` is set to
+/// the term that decided: the one found below the floor, else the smallest.
+pub fn scaled_jacobian_unless_below_from(c: &[Point3<f64>; 8], floor: f64, hint: &mut u8) -> f64 {
+    if *hint != 0 && floor > f64::NEG_INFINITY {
+        let first = scaled_jacobian_term(c, *hint as usize);
+        if first <= floor {
+            return first;
         }
-    };
-    let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
-    // principal axes at the centroid
-    let x1 = sum([1, 2, 5, 6]) - sum([0, 3, 4, 7]);
-    let x2 = sum([2, 3, 6, 7]) - sum([0, 1, 4, 5]);
-    let x3 = sum([4, 5, 6, 7]) - sum([0, 1, 2, 3]);
-    let mut min = det_unit(x1, x2, x3);
-    for (i, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
-        if min <= floor {
-            break;
-        }
-        min = min.min(det_unit(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i]));
     }
+    let mut min = scaled_jacobian_term(c, 0);
+    let mut at = 0;
+    if min > floor || min.is_nan() {
+        // Each edge's length once (two corners share it; its two directions have the same
+        // length to the bit), each corner's edge vectors as the corner measures them.
+        let lengths = HEX_EDGES.map(|[a, b]| (c[b] - c[a]).norm());
+        for (i, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
+            if min <= floor {
+                break;
+            }
+            let [ea, eb, ed] = CORNER_EDGES[i];
+            let q = det_unit(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i], [lengths[ea], lengths[eb], lengths[ed]]);
+            if q < min || (min.is_nan() && !q.is_nan()) {
+                at = i + 1;
+            }
+            min = min.min(q);
+        }
+    }
+    *hint = at as u8;
     min
+}
+
+/// The edges ([`HEX_EDGES`]) from each corner to its neighbours, in [`HEX_CORNER_NEIGHBOURS`]'s order.
+const CORNER_EDGES: [[usize; 3]; 8] = {
+    let mut table = [[0; 3]; 8];
+    let mut i = 0;
+    while i < 8 {
+        let mut k = 0;
+        while k < 3 {
+            let j = HEX_CORNER_NEIGHBOURS[i][k];
+            let mut e = 0;
+            while e < 12 {
+                let [a, b] = HEX_EDGES[e];
+                if (a == i && b == j) || (a == j && b == i) {
+                    table[i][k] = e;
+                }
+                e += 1;
+            }
+            k += 1;
+        }
+        i += 1;
+    }
+    table
+};
+
+/// The determinant of `a`, `b`, `d` over their `lengths`; 0 where an edge has collapsed next to
+/// the others (see [`COLLAPSED_EDGE`]).
+#[inline(always)]
+fn det_unit(a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>, lengths: [f64; 3]) -> f64 {
+    let (shortest, longest) = (lengths[0].min(lengths[1]).min(lengths[2]), lengths[0].max(lengths[1]).max(lengths[2]));
+    if shortest <= COLLAPSED_EDGE * longest || shortest <= f64::MIN_POSITIVE {
+        0.0
+    } else {
+        a.cross(&b).dot(&d) / (lengths[0] * lengths[1] * lengths[2])
+    }
+}
+
+/// One of the nine terms of the scaled Jacobian: the determinant of the three normalised
+/// principal axes at the centroid (`term` 0, differences of opposite face sums), or of the unit
+/// edges leaving corner `term - 1` in right-handed order.
+#[inline(always)]
+fn scaled_jacobian_term(c: &[Point3<f64>; 8], term: usize) -> f64 {
+    let det_unit = |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>| det_unit(a, b, d, [a.norm(), b.norm(), d.norm()]);
+    if term == 0 {
+        let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
+        let x1 = sum([1, 2, 5, 6]) - sum([0, 3, 4, 7]);
+        let x2 = sum([2, 3, 6, 7]) - sum([0, 1, 4, 5]);
+        let x3 = sum([4, 5, 6, 7]) - sum([0, 1, 2, 3]);
+        det_unit(x1, x2, x3)
+    } else {
+        let i = term - 1;
+        let nb = HEX_CORNER_NEIGHBOURS[i];
+        det_unit(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i])
+    }
 }
 
 /// Equi-angle skew of a hexahedron. The extreme angles are those of the extreme cosines (acos
@@ -189,9 +256,17 @@ pub enum Validity {
 impl Validity {
     /// The element's validity when it is above `floor`; otherwise some value at most `floor`.
     pub fn unless_below(self, c: &[Point3<f64>; 8], floor: f64) -> f64 {
+        self.unless_below_from(c, floor, &mut 0)
+    }
+
+    /// [`Self::unless_below`] with the scaled Jacobian's term `hint` measured first (see
+    /// [`scaled_jacobian_unless_below_from`]): the same value above the floor.
+    pub fn unless_below_from(self, c: &[Point3<f64>; 8], floor: f64, hint: &mut u8) -> f64 {
+        let sj = scaled_jacobian_unless_below_from(c, floor, hint);
         match self {
-            Validity::Corners => scaled_jacobian_unless_below(c, floor),
-            Validity::CornersAndPyramids => validity_unless_below(c, floor),
+            Validity::Corners => sj,
+            Validity::CornersAndPyramids if sj.is_nan() || sj <= floor => sj,
+            Validity::CornersAndPyramids => validity_from(sj, face_pyramid_ratio(c)),
         }
     }
 }
@@ -375,6 +450,65 @@ pub(crate) mod tests {
         let mut m = crate::geometry::mesh::unit_cube();
         m.iter_mut().for_each(|p| p.z = -p.z);
         assert_eq!(face_pyramids(&m), [-1.0; 6], "an inverted cell");
+    }
+
+    /// The scaled Jacobian as Verdict defines it, each corner's edges measured on their own:
+    /// the oracle of the shared edge lengths and of the hinted measure.
+    fn scaled_jacobian_by_terms(c: &[Point3<f64>; 8]) -> f64 {
+        let det_unit = |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>| {
+            let l = [a.norm(), b.norm(), d.norm()];
+            if l[0].min(l[1]).min(l[2]) <= COLLAPSED_EDGE * l[0].max(l[1]).max(l[2]) {
+                0.0
+            } else {
+                a.cross(&b).dot(&d) / (l[0] * l[1] * l[2])
+            }
+        };
+        let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
+        let x = [
+            sum([1, 2, 5, 6]) - sum([0, 3, 4, 7]),
+            sum([2, 3, 6, 7]) - sum([0, 1, 4, 5]),
+            sum([4, 5, 6, 7]) - sum([0, 1, 2, 3]),
+        ];
+        HEX_CORNER_NEIGHBOURS
+            .iter()
+            .enumerate()
+            .map(|(i, nb)| det_unit(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i]))
+            .fold(det_unit(x[0], x[1], x[2]), f64::min)
+    }
+
+    /// Above the floor the value is the oracle's to the bit whatever term is measured first;
+    /// at or below it, some value at most the floor; the hint left names a term at most the
+    /// value: on sheared, warped, inverted and collapsed cells.
+    #[test]
+    fn a_hinted_measure_is_the_scaled_jacobian_to_the_bit_above_the_floor() {
+        let mut cells = vec![warped_slab(0.1, [0.03, 0.001, 0.001, 0.001]), warped_slab(0.0, [1.0; 4])];
+        for k in 0..60 {
+            let mut c = warped_slab(0.05 * (k % 5) as f64, [1.0; 4]);
+            for (j, p) in c.iter_mut().enumerate() {
+                let t = (k * 8 + j) as f64 * 0.754_877_666;
+                *p += Vector3::new((3.1 * t).sin(), (1.7 * t).cos(), (2.3 * t).sin()) * (0.02 * (k % 17) as f64);
+            }
+            if k % 11 == 0 {
+                c[6] = c[7];
+            }
+            cells.push(c);
+        }
+        for c in &cells {
+            let exact = scaled_jacobian_by_terms(c);
+            assert_eq!(scaled_jacobian(c).to_bits(), exact.to_bits());
+            for floor in [f64::NEG_INFINITY, -0.5, 0.0, 0.2, 0.6, 0.95] {
+                for start in 0..9u8 {
+                    let mut hint = start;
+                    let q = scaled_jacobian_unless_below_from(c, floor, &mut hint);
+                    if exact > floor {
+                        assert_eq!(q.to_bits(), exact.to_bits(), "floor {floor}, hint {start}");
+                    } else {
+                        assert!(q <= floor, "floor {floor}, hint {start}: {q} for {exact}");
+                    }
+                    assert!(scaled_jacobian_term(c, hint as usize) <= q.max(floor), "hint {hint}");
+                }
+            }
+        }
     }
 
     #[test]

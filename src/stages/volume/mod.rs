@@ -431,11 +431,24 @@ fn improve_junction_nodes(
     // The worst element, each by its `validity`, or, once it is at most `floor`, some value at
     // most `floor`: a trial move is only ever compared with a floor.
     // `first`, the element that was worst before the move, is measured first: a move that
-    // does not help mostly fails there.
-    let worst = |nodes: &[Point3<f64>], elements: &[usize], first: usize, floor: f64| -> f64 {
+    // does not help mostly fails there. Each element's value goes to `measured`: a move that is
+    // taken had every element above the floor, so measured in full (an element's measure stops
+    // early only at the floor), and those values are the ones `known` would measure again.
+    // Each element's term of the scaled Jacobian that decided its last measure, measured first
+    // on a trial move (see `Validity::unless_below_from`: the same values above the floor).
+    let mut hints: Vec<u8> = vec![0; lumen.len()];
+    let worst = |nodes: &[Point3<f64>],
+                 elements: &[usize],
+                 first: usize,
+                 floor: f64,
+                 measured: &mut Vec<(usize, f64)>,
+                 hints: &mut [u8]| {
+        measured.clear();
         let mut min = f64::INFINITY;
         for &e in std::iter::once(&first).chain(elements.iter().filter(|&&e| e != first)) {
-            min = min.min(validity[e].unless_below(&lumen[e].map(|n| nodes[n as usize]), floor));
+            let q = validity[e].unless_below_from(&lumen[e].map(|n| nodes[n as usize]), floor, &mut hints[e]);
+            measured.push((e, q));
+            min = min.min(q);
             if min <= floor {
                 break;
             }
@@ -445,12 +458,13 @@ fn improve_junction_nodes(
     // Each element's validity, known until one of its corners moves: a node's elements are
     // measured before each trial move, mostly unchanged since the last.
     let mut known: Vec<Option<f64>> = vec![None; lumen.len()];
-    let worst_cached = |known: &mut [Option<f64>], nodes: &[Point3<f64>], elements: &[usize]| -> f64 {
+    let worst_cached = |known: &mut [Option<f64>], nodes: &[Point3<f64>], elements: &[usize], hints: &mut [u8]| {
         elements
             .iter()
             .map(|&e| {
                 *known[e].get_or_insert_with(|| {
-                    validity[e].unless_below(&lumen[e].map(|n| nodes[n as usize]), f64::NEG_INFINITY)
+                    let c = lumen[e].map(|n| nodes[n as usize]);
+                    validity[e].unless_below_from(&c, f64::NEG_INFINITY, &mut hints[e])
                 })
             })
             .fold(f64::INFINITY, f64::min)
@@ -462,9 +476,10 @@ fn improve_junction_nodes(
     let mut still_since: Vec<Option<u64>> = vec![None; nodes.len()];
     // The worst element after each sweep past OPTIMISATION_SWEEPS.
     let mut worst_after: Vec<f64> = Vec::new();
+    let (mut measured, mut best_measured) = (Vec::new(), Vec::new());
     for sweep in 0..MAX_OPTIMISATION_SWEEPS {
         if sweep >= OPTIMISATION_SWEEPS {
-            let now = worst_cached(&mut known, nodes, &all_incident);
+            let now = worst_cached(&mut known, nodes, &all_incident, &mut hints);
             let stalled = worst_after.len() >= STALLED_SWEEPS
                 && now <= worst_after[worst_after.len() - STALLED_SWEEPS] + STALLED_GAIN;
             if now > QUALITY_BAR_SJ || stalled {
@@ -473,34 +488,34 @@ fn improve_junction_nodes(
             worst_after.push(now);
         }
         let moves_before = moves;
-        for &n in &free {
+        for (slot, &n) in free.iter().enumerate() {
             if let Some(since) = still_since[n as usize] {
-                if corners[&n].iter().all(|&c| moved_at[c as usize].is_none_or(|t| t <= since)) {
+                if corners[slot].iter().all(|&c| moved_at[c as usize].is_none_or(|t| t <= since)) {
                     continue;
                 }
             }
-            let elements = &incident[&n];
+            let elements = &incident[slot];
             let on_surface = movable[n as usize] == Freedom::OnSurface;
-            let nb = if on_surface { &on_outer_face[&n] } else { &neighbours[&n] };
+            let nb = if on_surface { &on_outer_face[slot] } else { &neighbours[slot] };
             if nb.is_empty() {
                 continue;
             }
             let centroid = nb.iter().fold(Vector3::zeros(), |acc, &j| acc + nodes[j as usize].coords) / nb.len() as f64;
             let old = nodes[n as usize];
-            let before = worst_cached(&mut known, nodes, elements);
+            let before = worst_cached(&mut known, nodes, elements, &mut hints);
             let first = *elements
                 .iter()
                 .min_by(|&&a, &&b| known[a].unwrap_or(f64::INFINITY).total_cmp(&known[b].unwrap_or(f64::INFINITY)))
                 .expect("a node's elements");
             let mut moved = false;
             let place = |p: Point3<f64>| match movable[n as usize] {
-                Freedom::OnSurface => surface.closest(&p).point,
+                Freedom::OnSurface => surface.closest_near(&p, &old).point,
                 Freedom::Across(d) => p - d * (p - old).dot(&d),
                 _ => p,
             };
             for step in [1.0, 0.5, 0.25] {
                 nodes[n as usize] = place(old + (Point3::from(centroid) - old) * step);
-                if worst(nodes, elements, first, before + 1e-9) > before + 1e-9 {
+                if worst(nodes, elements, first, before + 1e-9, &mut measured, &mut hints) > before + 1e-9 {
                     moved = true;
                     break;
                 }
@@ -514,20 +529,24 @@ fn improve_junction_nodes(
                 for scale in [0.2, 0.05] {
                     for d in [Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y(), Vector3::z(), -Vector3::z()] {
                         nodes[n as usize] = place(old + d * (h * scale));
-                        let q = worst(nodes, elements, first, best.0 + 1e-9);
+                        let q = worst(nodes, elements, first, best.0 + 1e-9, &mut measured, &mut hints);
                         if q > best.0 + 1e-9 {
                             best = (q, nodes[n as usize]);
+                            std::mem::swap(&mut measured, &mut best_measured);
                         }
                     }
                 }
                 nodes[n as usize] = best.1;
                 moved = best.1 != old;
+                std::mem::swap(&mut measured, &mut best_measured);
             }
             if moved {
                 moves += 1;
                 moved_at[n as usize] = Some(moves);
                 still_since[n as usize] = None;
-                elements.iter().for_each(|&e| known[e] = None);
+                for &(e, q) in &measured {
+                    known[e] = Some(q);
+                }
             } else {
                 still_since[n as usize] = Some(moves);
             }
@@ -538,31 +557,37 @@ fn improve_junction_nodes(
     }
 }
 
-/// The lumen around the movable nodes, as [`improve_junction_nodes`] walks it.
+/// The lumen around the movable nodes, as [`improve_junction_nodes`] walks it: each by the
+/// node's place in the list of movable nodes.
 struct Neighbourhood {
     /// Each movable node's elements.
-    incident: HashMap<u32, Vec<usize>>,
+    incident: Vec<Vec<usize>>,
     /// Each movable node's edge neighbours.
-    neighbours: HashMap<u32, Vec<u32>>,
+    neighbours: Vec<Vec<u32>>,
     /// A surface node's neighbours along the surface: the other corners of its outer faces
-    /// that share an edge with it.
-    on_outer_face: HashMap<u32, Vec<u32>>,
+    /// that share an edge with it (none for the other nodes).
+    on_outer_face: Vec<Vec<u32>>,
     /// The other corners of each movable node's elements: a node tried without moving gives
     /// the same answer again until one of them moves, so it is skipped until then (the result
     /// is the same as trying it).
-    corners: HashMap<u32, Vec<u32>>,
+    corners: Vec<Vec<u32>>,
     /// Every element with a movable corner, sorted.
     all_incident: Vec<usize>,
 }
 
 fn neighbourhood(lumen: &[Hex], movable: &[Freedom], free: &[u32]) -> Neighbourhood {
-    let mut incident: HashMap<u32, Vec<usize>> = HashMap::new();
-    let mut neighbours: HashMap<u32, Vec<u32>> = HashMap::new();
+    let mut slot_of = vec![u32::MAX; movable.len()];
+    for (k, &n) in free.iter().enumerate() {
+        slot_of[n as usize] = k as u32;
+    }
+    let mut incident: Vec<Vec<usize>> = vec![Vec::new(); free.len()];
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len()];
     for (e, h) in lumen.iter().enumerate() {
         for (c, &n) in h.iter().enumerate() {
             if movable[n as usize] != Freedom::Fixed {
-                incident.entry(n).or_default().push(e);
-                let nb = neighbours.entry(n).or_default();
+                let slot = slot_of[n as usize] as usize;
+                incident[slot].push(e);
+                let nb = &mut neighbours[slot];
                 for &[a, b] in HEX_EDGES.iter() {
                     if a == c {
                         nb.push(h[b]);
@@ -573,16 +598,19 @@ fn neighbourhood(lumen: &[Hex], movable: &[Freedom], free: &[u32]) -> Neighbourh
             }
         }
     }
-    for nb in neighbours.values_mut() {
+    for nb in &mut neighbours {
         nb.sort_unstable();
         nb.dedup();
     }
-    let on_outer_face: HashMap<u32, Vec<u32>> = free
+    let on_outer_face: Vec<Vec<u32>> = free
         .iter()
-        .filter(|&&n| movable[n as usize] == Freedom::OnSurface)
-        .map(|&n| {
+        .enumerate()
+        .map(|(slot, &n)| {
             let mut nb: Vec<u32> = Vec::new();
-            for &e in &incident[&n] {
+            if movable[n as usize] != Freedom::OnSurface {
+                return nb;
+            }
+            for &e in &incident[slot] {
                 let outer = crate::geometry::mesh::face_nodes(&lumen[e], crate::geometry::mesh::FACE_OUTER);
                 if let Some(at) = outer.iter().position(|&x| x == n) {
                     nb.push(outer[(at + 1) % 4]);
@@ -591,20 +619,21 @@ fn neighbourhood(lumen: &[Hex], movable: &[Freedom], free: &[u32]) -> Neighbourh
             }
             nb.sort_unstable();
             nb.dedup();
-            (n, nb)
+            nb
         })
         .collect();
-    let corners: HashMap<u32, Vec<u32>> = free
+    let corners: Vec<Vec<u32>> = free
         .iter()
-        .map(|&n| {
-            let mut c: Vec<u32> = incident[&n].iter().flat_map(|&e| lumen[e]).filter(|&x| x != n).collect();
+        .enumerate()
+        .map(|(slot, &n)| {
+            let mut c: Vec<u32> = incident[slot].iter().flat_map(|&e| lumen[e]).filter(|&x| x != n).collect();
             c.sort_unstable();
             c.dedup();
-            (n, c)
+            c
         })
         .collect();
     let all_incident: Vec<usize> = {
-        let mut v: Vec<usize> = incident.values().flatten().copied().collect();
+        let mut v: Vec<usize> = incident.iter().flatten().copied().collect();
         v.sort_unstable();
         v.dedup();
         v

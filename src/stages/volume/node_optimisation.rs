@@ -215,31 +215,47 @@ pub fn optimise_nodes(
             }
         }
     }
-    let local = |nodes: &[Point3<f64>], n: u32| -> f64 {
+    let measure = |nodes: &[Point3<f64>], e: u32| {
+        element_penalty(&elements[e as usize].map(|m| nodes[m as usize]), size[e as usize], validity[e as usize])
+    };
+    // The objective around node `n`, each element's penalty put in `values` (in the order of
+    // `incident`).
+    let local = |nodes: &[Point3<f64>], n: u32, values: &mut Vec<f64>| -> f64 {
+        values.clear();
         incident[n as usize]
             .iter()
             .map(|&e| {
-                element_penalty(
-                    &elements[e as usize].map(|m| nodes[m as usize]),
-                    size[e as usize],
-                    validity[e as usize],
-                )
+                let value = measure(nodes, e);
+                values.push(value);
+                value
             })
             .sum()
     };
+    // Each element's penalty, known until one of its corners moves (NaN: to be measured): a
+    // node's objective at the start of its visit is mostly of elements unchanged since they
+    // were last measured, and summed in the same order the same values give the same sum.
+    let mut penalty = vec![f64::NAN; elements.len()];
+    let mut values = Vec::new();
     // The objective around node `n` and its gradient there (`step`: the pyramids' difference).
-    let local_and_gradient = |nodes: &[Point3<f64>], n: u32, step: f64| -> (f64, Vector3<f64>) {
-        incident[n as usize].iter().fold((0.0, Vector3::zeros()), |(f, g), &e| {
+    // The objective's gradient around node `n` (`step`: the pyramids' difference), from each
+    // element's penalty (`penalty`, measured where the nodes stand). An element judged by its
+    // corners alone with no penalty has every term past its target and none inverted, so each
+    // term's gradient is zero (as `term` returns it): it adds a zero without being measured.
+    let gradient_at = |nodes: &[Point3<f64>], n: u32, step: f64, penalty: &[f64]| -> Vector3<f64> {
+        incident[n as usize].iter().fold(Vector3::zeros(), |g, &e| {
+            if penalty[e as usize] == 0.0 && validity[e as usize] == Validity::Corners {
+                return g + Vector3::zeros();
+            }
             let h = &elements[e as usize];
             let corners = (0..8).filter(|&k| h[k] == n).fold(0u8, |mask, k| mask | (1 << k));
-            let (fe, ge) = element_penalty_and_gradient(
+            let (_, ge) = element_penalty_and_gradient(
                 &h.map(|m| nodes[m as usize]),
                 size[e as usize],
                 validity[e as usize],
                 corners,
                 step,
             );
-            (f + fe, g + ge)
+            g + ge
         })
     };
     // The shortest edge at each free node, from the start (the step's scale).
@@ -261,17 +277,30 @@ pub fn optimise_nodes(
             }
             // The gradient only where the node has something to gain (most of a sweep's nodes
             // stand among elements already past the target).
-            let f0 = local(nodes, n);
+            let f0: f64 = incident[n as usize]
+                .iter()
+                .map(|&e| {
+                    let known = &mut penalty[e as usize];
+                    if known.is_nan() {
+                        *known = measure(nodes, e);
+                    }
+                    *known
+                })
+                .sum();
             before += f0;
             let f = if f0 > 0.0 && h > 0.0 {
-                let (_, gradient) = local_and_gradient(nodes, n, GRADIENT_STEP * h);
+                let gradient = gradient_at(nodes, n, GRADIENT_STEP * h, &penalty);
                 let start = Start { f0, gradient, h, first_step };
-                descend(nodes, n, start, freedom[n as usize], &local, surface)
+                descend(nodes, n, start, freedom[n as usize], &mut |nodes, n| local(nodes, n, &mut values), surface)
             } else {
                 f0
             };
             after += f;
             if f < f0 {
+                // The node moved: its elements as measured where it stands now.
+                for (&e, &value) in incident[n as usize].iter().zip(&values) {
+                    penalty[e as usize] = value;
+                }
                 for &e in &incident[n as usize] {
                     for &m in &elements[e as usize] {
                         if is_free(m) {
@@ -309,7 +338,7 @@ fn descend(
     n: u32,
     start: Start,
     freedom: Freedom,
-    local: &impl Fn(&[Point3<f64>], u32) -> f64,
+    local: &mut impl FnMut(&[Point3<f64>], u32) -> f64,
     surface: &LumenSurface,
 ) -> f64 {
     let Start { f0, gradient, h, first_step } = start;
@@ -326,7 +355,7 @@ fn descend(
     for _ in 0..=BACKTRACKS {
         let p = old + direction * (length / norm);
         nodes[n as usize] = match freedom {
-            Freedom::OnSurface => surface.closest(&p).point,
+            Freedom::OnSurface => surface.closest_near(&p, &old).point,
             _ => p,
         };
         let f = local(nodes, n);

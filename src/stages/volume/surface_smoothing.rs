@@ -70,7 +70,7 @@ pub fn smooth_on_surface(nodes: &mut [Point3<f64>], smoothed: &[SmoothedNode], l
             let sum = s.neighbours.iter().fold(Vector3::zeros(), |acc, &j| acc + nodes[j as usize].coords);
             let centroid = Point3::from(sum / s.neighbours.len() as f64);
             let old = nodes[s.node as usize];
-            let new = surface.closest(&(old + (centroid - old) * RELAXATION)).point;
+            let new = surface.closest_near(&(old + (centroid - old) * RELAXATION), &old).point;
             place(nodes, s, new);
         }
     }
@@ -217,7 +217,7 @@ impl Shaping<'_> {
         let mut share = *first_step;
         let mut measured = vec![0.0; s.elements.len()];
         for _ in 0..(if norm > 0.0 { BACKTRACKS } else { 0 }) {
-            place(nodes, s, self.surface.closest(&(old - gradient * (share * h / norm))).point);
+            place(nodes, s, self.surface.closest_near(&(old - gradient * (share * h / norm)), &old).point);
             let f = shape_objective(nodes, s, lumen);
             if f < f0
                 && s.elements.iter().zip(&floor).zip(&mut measured).all(|((&e, least), q)| {
