@@ -122,7 +122,7 @@ pub fn build_volume(
         ray: &ray,
         in_junction: &in_junction,
         end_tangent: vessel_end_tangents(projected, &numbering),
-        nominal: nominal_thickness(&graph, &radius, &in_junction, inputs.wall_thickness),
+        nominal: graph.nodes.iter().map(|&s| (inputs.wall_thickness)(radius[s as usize])).collect(),
         numbering: &numbering,
     };
 
@@ -800,33 +800,6 @@ fn worst_of(nodes: &[Point3<f64>], elements: &[Hex], movable: &[Freedom], judged
         .filter(|h| h.iter().any(|&n| movable[n as usize] != Freedom::Fixed))
         .map(|h| judged.unless_below(&h.map(|n| nodes[n as usize]), f64::NEG_INFINITY))
         .fold(f64::INFINITY, f64::min)
-}
-
-/// Passes of neighbour averaging of the nominal thickness over a junction's transitions.
-const JUNCTION_THICKNESS_PASSES: usize = 10;
-
-/// The wall's nominal thickness at every lumen-surface node (in the graph's order): the wall
-/// thickness of its section's radius (see `numbering::wall_radius`), averaged over the
-/// junctions' transitions with the nodes outside them held. Each branch's transition keeps its
-/// branch's thickness, so where two branches of different radii meet along a page the thickness
-/// would step; averaged, it passes from one to the other over a few elements, as it runs on
-/// into the ordinary sections unchanged.
-fn nominal_thickness(
-    graph: &SurfaceGraph,
-    radius: &[f64],
-    in_junction: &[bool],
-    wall_thickness: &(dyn Fn(f64) -> f64 + Sync),
-) -> Vec<f64> {
-    let mut nominal: Vec<f64> = graph.nodes.iter().map(|&s| wall_thickness(radius[s as usize])).collect();
-    let free: Vec<usize> = (0..graph.nodes.len()).filter(|&i| in_junction[graph.nodes[i] as usize]).collect();
-    for _ in 0..JUNCTION_THICKNESS_PASSES {
-        let prev = nominal.clone();
-        for &i in &free {
-            let nb = &graph.neighbours[i];
-            nominal[i] = 0.5 * prev[i] + 0.5 * nb.iter().map(|&j| prev[j]).sum::<f64>() / nb.len() as f64;
-        }
-    }
-    nominal
 }
 
 /// Where the wall, grown outwards from one side of a crotch, would reach the lumen on the other
