@@ -6,7 +6,7 @@ use super::{add_columns, JunctionOptimisation, RadialLevels};
 use crate::geometry::mesh::Hex;
 use crate::stages::junction::blocks::SectionTemplate;
 use crate::stages::junction::{FoldKey, JunctionGeometry};
-use crate::stages::projection::{BranchEnd, DomeTop, ProjectedBranch, ProjectedSection};
+use crate::stages::projection::{BranchEnd, DomeTop, ProjectedBranch};
 use crate::stages::volume::node_optimisation::Freedom;
 use crate::stages::volume::surface_smoothing::RayNode;
 use indexmap::IndexMap;
@@ -47,8 +47,6 @@ impl LumenNodes {
     /// The node's id: a new one, or the pooled node of its fold key.
     fn add(&mut self, key: Option<FoldKey>, node: NewNode) -> u32 {
         if let Some(&id) = key.as_ref().and_then(|key| self.pool.get(key)) {
-            // A page's node carries the thinnest wall of the branches sharing it.
-            self.radius[id as usize] = self.radius[id as usize].min(node.radius);
             return id;
         }
         let id = self.nodes.len() as u32;
@@ -127,10 +125,9 @@ fn place_station(
     let key = |c: usize, level: usize| {
         fold.map(|f| FoldKey::new(&junctions[f.junction], &f, template, c % (nx + 1), c / (nx + 1), level))
     };
-    let radius = wall_radius(pb, i);
     let node = |point: Point3<f64>, ray: Vector3<f64>, movable: Freedom, poor_mobility: Freedom| NewNode {
         point,
-        radius,
+        radius: sec.station.radius,
         in_junction: sec.in_junction,
         ray,
         movable,
@@ -159,26 +156,6 @@ fn place_station(
         add_columns(&mut lumen.smoothed_columns, &ids, template, sec, levels);
     }
     ids
-}
-
-/// The radius a section's wall thickness follows: its own, but in a junction's transition no
-/// more than the branch's own there (its ordinary section next to the transition; a bridge, with
-/// none, keeps its own). A transition's sections widen towards the junction's radius, the
-/// largest ball where the branches meet: a wall that thick, grown into the crotch between two
-/// smaller branches, or over an aneurysm sac that is their junction at several times their
-/// radius, converges on itself there and shears, though each branch's wall is as thick as its
-/// own radius asks.
-fn wall_radius(pb: &ProjectedBranch, i: usize) -> f64 {
-    let sections = &pb.sections;
-    let sec = &sections[i];
-    if !sec.in_junction {
-        return sec.station.radius;
-    }
-    let ordinary = |s: &&ProjectedSection| !s.in_junction;
-    let before_first = sections[..i].iter().all(|s| s.in_junction);
-    let own =
-        if before_first { sections[i..].iter().find(ordinary) } else { sections[..i].iter().rev().find(ordinary) };
-    own.map_or(sec.station.radius, |o| sec.station.radius.min(o.station.radius))
 }
 
 /// The node at radial level `rho` (0 at the core, 1 at the surface) of a ray from `origin` to
