@@ -39,7 +39,7 @@ pub use geometry::{mesh, quality, surface};
 pub use io::{input, output};
 pub use pipeline::{finishing, progress, report};
 pub use stages::additions::{extensions, refinement, side_ends, wall_surfaces};
-pub use stages::annotation::{accuracy, annotate, end_names, meshed, sacs};
+pub use stages::annotation::{accuracy, annotate, end_names, inlets, meshed, sacs};
 pub use stages::centerline::extract as centerline_extract;
 pub use stages::junction::blocks;
 pub use stages::projection::end_planes;

@@ -4,6 +4,7 @@ use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use vesselhex::config::{MeshConfig, Preset};
+use vesselhex::inlets::InletMark;
 use vesselhex::pipeline::{run, MeshRequest};
 use vesselhex::report::Warning;
 use vesselhex::units::LengthUnit;
@@ -129,7 +130,7 @@ Parameters come from the preset, then the case file (--config, TOML), then these
           [wall.adventitia]: fraction, elements, fibre_angle_deg
   [extensions] ends, inlet_length, outlet_length, [extensions.length], shape, blend_length, fe_decks
   [refinement] before_projection, after_projection
-  [openfoam] mean_velocity, flow_rate_ml_s, profile, solver, nu, iterations, end_time, binary
+  [openfoam] mean_velocity, flow_rate_ml_s, inlet_flow_rates_ml_s, profile, solver, nu, iterations, end_time, binary
   [fe] abaqus_element, calculix_element, material, template_dir, pressure_mmhg
   [febio] element, lumen_pressure_mmhg, static_steps, [febio.blood], [febio.fsi]
   [material.<layer>] c_kpa, k1_kpa, k2, kappa, bulk_kpa, density_kg_m3, youngs_modulus_kpa, poisson_ratio
@@ -203,10 +204,13 @@ struct MeshArgs {
     /// Worker threads, 1 to 256 (0 or none: all cores). The output does not depend on it.
     #[arg(long, value_parser = clap::value_parser!(u16).range(0..=MAX_THREADS))]
     threads: Option<u16>,
-    /// Without --centerlines: the inlet of the computed centerlines, auto (the cap named inlet,
-    /// else the largest end) or x,y,z (the end nearest this point, in --units).
-    #[arg(long, default_value = "auto")]
-    inlet: String,
+    /// The inlet: auto (the cap named inlet, else the largest cap named inlet_<x>, else the
+    /// largest end), x,y,z (the end nearest this point, in --units) or the NAME of a cap.
+    /// Repeatable: every end so given is an inlet, the first the one the centerlines start from
+    /// (with --centerlines, theirs); several inlets are named inlet_1, inlet_2, ... unless their
+    /// caps name them, and each is its own OpenFOAM inlet patch.
+    #[arg(long, default_value = "auto", value_name = "auto|x,y,z|NAME")]
+    inlet: Vec<String>,
     /// Without --centerlines: points x,y,z (in --units) near ends, overriding those found (every
     /// end, rounded caps included, is found without them).
     #[arg(long, num_args = 1..)]
@@ -267,6 +271,31 @@ fn parse_point(text: &str, scale: f64) -> vesselhex::Result<nalgebra::Point3<f64
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(nalgebra::Point3::new(*x, *y, *z) * scale),
         _ => Err(vesselhex::Error::Config(format!("'{text}' is not a point x,y,z (three numbers, comma-separated)"))),
     }
+}
+
+/// The `--inlet` values: `auto` (alone: no mark), points x,y,z (in the input unit, `scale` to
+/// mm) and cap names.
+fn parse_inlets(values: &[String], scale: f64) -> vesselhex::Result<Vec<InletMark>> {
+    if values.iter().any(|v| v == "auto") {
+        return match values {
+            [_] => Ok(vec![]),
+            _ => Err(vesselhex::Error::Config(
+                "--inlet auto cannot be given with other --inlet values: give the inlets as points or cap names".into(),
+            )),
+        };
+    }
+    values
+        .iter()
+        .map(
+            |v| {
+                if v.contains(',') {
+                    parse_point(v, scale).map(InletMark::Point)
+                } else {
+                    Ok(InletMark::Cap(v.clone()))
+                }
+            },
+        )
+        .collect()
 }
 
 fn centerlines(args: CenterlinesArgs) -> vesselhex::Result<()> {
@@ -389,11 +418,16 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
             .map_err(|e| vesselhex::Error::Config(format!("--threads {n}: {e}")))?;
     }
     let scale = config.units.to_mm();
+    let inlet_marks = parse_inlets(&args.inlet, scale)?;
     let extraction = vesselhex::centerline_extract::ExtractOptions {
-        inlet: match args.inlet.as_str() {
-            "auto" => vesselhex::centerline_extract::InletChoice::Largest,
-            point => vesselhex::centerline_extract::InletChoice::Nearest(parse_point(point, scale)?),
+        inlet: match inlet_marks.first() {
+            Some(InletMark::Point(p)) => vesselhex::centerline_extract::InletChoice::Nearest(*p),
+            _ => vesselhex::centerline_extract::InletChoice::Largest,
         },
+        inlet_names: inlet_marks
+            .iter()
+            .filter_map(|m| if let InletMark::Cap(name) = m { Some(name.clone()) } else { None })
+            .collect(),
         ends: args.ends.iter().map(|e| parse_point(e, scale)).collect::<vesselhex::Result<Vec<_>>>()?,
         sacs: args.sacs.iter().map(|e| parse_point(e, scale)).collect::<vesselhex::Result<Vec<_>>>()?,
         caps: vec![],
@@ -412,6 +446,7 @@ fn mesh(args: MeshArgs) -> vesselhex::Result<MeshOutcome> {
         quiet: args.quiet,
         reproducible: args.reproducible,
         warnings,
+        inlets: inlet_marks,
     };
     let report = run(&request)?;
     for w in &report.warnings {

@@ -981,3 +981,64 @@ fn simplefoam_converges_on_the_t_junction_with_balanced_mass_serial_and_on_two_r
     }
     cleanup(&run.dir);
 }
+
+/// A vessel fed through two ends, as the vertebral arteries feed the basilar artery: the Y
+/// fixture meshed from its bare surface with both daughters given as inlets (`--inlet` twice,
+/// at the daughters' centerline ends, read from the fixture's centerlines). One inlet's flow is
+/// given by name (`inlet_flow_rates_ml_s`), the other takes `flow_rate_ml_s`. Checked: the
+/// daughters' ends are the inlets, named `inlet_1` (the first given) and `inlet_2`, the trunk's
+/// end is `outlet`; each is its own patch; checkMesh says Mesh OK; simpleFoam converges; the
+/// solver's flux through each inlet is the flow asked for it and the outflow is their sum.
+#[test]
+fn a_vessel_fed_through_two_inlets_takes_each_inlets_flow() {
+    if !openfoam_available("a_vessel_fed_through_two_inlets_takes_each_inlets_flow") {
+        return;
+    }
+    let fixtures = common::fixtures_dir();
+    let lines = vesselhex::input::read_centerlines(
+        &fixtures.join("y_bifurcation_centerlines.vtp"),
+        vesselhex::units::LengthUnit::Mm,
+    )
+    .unwrap();
+    let daughters: Vec<String> =
+        lines.polylines.iter().map(|l| l.points.last().unwrap()).map(|p| format!("{},{},{}", p.x, p.y, p.z)).collect();
+    assert_eq!(daughters.len(), 2, "the Y fixture has two daughters");
+    let dir = scratch("two-inlets");
+    let config = dir.join("flows.toml");
+    let (q1, q2) = (1.0, 0.5); // mL/s
+    std::fs::write(
+        &config,
+        format!("[openfoam]\nflow_rate_ml_s = {q1}\ninlet_flow_rates_ml_s = {{ inlet_2 = {q2} }}\niterations = 500\n"),
+    )
+    .unwrap();
+    let out = dir.join("mesh");
+    let inlet_args = [format!("--inlet={}", daughters[0]), format!("--inlet={}", daughters[1])];
+    let mut extra = vec!["--preset", "coarse", "--formats", "openfoam", "--config", common::path_str(&config)];
+    extra.extend(inlet_args.iter().map(String::as_str));
+    let report = common::mesh_surface_cli(&fixtures.join("y_bifurcation.stl"), &out, &extra);
+
+    // Each end named by role, the inlets where they were given.
+    let ends = report["ends"].as_array().unwrap();
+    let named = |name: &str| ends.iter().find(|e| e["name"] == name).unwrap_or_else(|| panic!("no end {name}"));
+    for (name, given) in [("inlet_1", &daughters[0]), ("inlet_2", &daughters[1])] {
+        let at: Vec<f64> = named(name)["position"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        let given: Vec<f64> = given.split(',').map(|x| x.parse().unwrap()).collect();
+        let gap = at.iter().zip(&given).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+        assert!(named(name)["inlet"] == true && gap < named(name)["radius"].as_f64().unwrap(), "{name}: {gap} mm off");
+    }
+    assert!(named("outlet")["inlet"] == false && ends.len() == 3, "{ends:?}");
+
+    let case = out.join("openfoam");
+    let poly = read_polymesh(&case).unwrap();
+    let patches: Vec<&str> = poly.patches.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(patches, ["inlet_1", "inlet_2", "outlet", "wall"]);
+    check_mesh(&case, &[]);
+    let (log, _) = allrun(&case, "simpleFoam");
+    assert!(log.contains("SIMPLE solution converged in"), "{}", &log[log.len().saturating_sub(3000)..]);
+    let (in_1, in_2) = (-patch_flux(&case, &poly, "inlet_1"), -patch_flux(&case, &poly, "inlet_2"));
+    let outflow = patch_flux(&case, &poly, "outlet");
+    assert!((in_1 - q1 * 1e-6).abs() < 1e-9 * q1 * 1e-6, "inlet_1 takes {in_1} m3/s, asked {q1} mL/s");
+    assert!((in_2 - q2 * 1e-6).abs() < 1e-9 * q2 * 1e-6, "inlet_2 takes {in_2} m3/s, asked {q2} mL/s");
+    assert!((outflow - in_1 - in_2).abs() < 1e-6 * (in_1 + in_2), "outflow {outflow} vs inflow {}", in_1 + in_2);
+    cleanup(&dir);
+}

@@ -14,6 +14,7 @@ use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 use std::path::{Path, PathBuf};
 use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions, Extraction, InletChoice};
 use vesselhex::config::{MeshConfig, Preset};
+use vesselhex::inlets::InletMark;
 use vesselhex::input::{PolylineArrays, TriangleSurface};
 use vesselhex::pipeline::{CenterlineSource, MeshSettings, MeshedVessel};
 use vesselhex::progress::Progress;
@@ -209,7 +210,7 @@ fn progress_calling(callback: Option<Py<PyAny>>, raised: std::sync::Arc<std::syn
 #[pyfunction]
 #[pyo3(signature = (*, surface_path=None, surface_arrays=None, centerlines_path=None, centerline_arrays=None,
     centerlines_computed=None, preset=None, config_path=None, config_dict=None, units=None, centerline_units=None,
-    output_units=None, formats=None, inlet=None, ends=vec![], max_memory=None, progress=None, caps=vec![]))]
+    output_units=None, formats=None, inlet=None, ends=vec![], max_memory=None, progress=None, caps=vec![], inlets=vec![]))]
 #[allow(clippy::too_many_arguments)]
 fn mesh(
     py: Python<'_>,
@@ -230,6 +231,7 @@ fn mesh(
     max_memory: Option<u64>,
     progress: Option<Py<PyAny>>,
     caps: Vec<(String, PathBuf)>,
+    inlets: Vec<[f64; 3]>,
 ) -> PyResult<Mesh> {
     for (name, _) in &caps {
         vesselhex::input::check_end_name(name).map_err(|e| config_error(format!("caps: {e}")))?;
@@ -269,7 +271,10 @@ fn mesh(
         (None, None, None) => CenterlineSource::Extract(extract_options(inlet, ends, config.units)),
         _ => return Err(config_error("give the centerlines one way only".into())),
     };
-    let settings = MeshSettings { config: config.clone(), centerline_units, max_memory, warnings: vec![], caps };
+    let to_mm = config.units.to_mm();
+    let inlets = inlets.into_iter().map(|p| InletMark::Point(nalgebra::Point3::from(p) * to_mm)).collect();
+    let settings =
+        MeshSettings { config: config.clone(), centerline_units, max_memory, warnings: vec![], caps, inlets };
     let vessel = py.detach(move || {
         let vessel = vesselhex::pipeline::mesh_surface(surface, centerlines, settings, &mut progress);
         progress.finish();

@@ -257,3 +257,21 @@ def test_a_real_vessel_equals_the_command_line(cli, vessels, tmp_path):
     assert_arrays_equal_vtu(m, tmp_path / "cli" / "mesh.vtu")
     assert len(m.branch_names) == 3 and m.scaled_jacobian.min() > 0
     assert m.report["within_bars"]
+
+
+def test_further_inlets_are_the_command_lines(repo, cli, tmp_path):
+    """A daughter of the Y flagged as a second inlet (``inlets=``, as ``--inlet`` with the
+    centerlines given): the same files as the command line writes, the daughter's end an inlet
+    named ``inlet_2`` beside the trunk's ``inlet_1``, each its own OpenFOAM patch."""
+    surface, centerlines = (repo / p for p in Y)
+    ends = vesselhex.mesh(surface, centerlines).report["ends"]
+    daughter = next(e["position"] for e in ends if not e["inlet"])
+    args = ["--surface", surface, "--centerlines", centerlines, "--reproducible", "--quiet", "--formats", "vtu,openfoam"]
+    run_cli(cli, "mesh", *args, "--inlet=" + ",".join(map(repr, daughter)), "--output", tmp_path / "cli")
+    m = vesselhex.mesh(surface, centerlines, inlets=[daughter])
+    m.write(tmp_path / "py", formats=["vtu", "openfoam"], reproducible=True)
+    assert same_files(tmp_path / "cli", tmp_path / "py") == []
+    inlets = sorted(e["name"] for e in m.report["ends"] if e["inlet"])
+    assert inlets == ["inlet_1", "inlet_2"]
+    boundary = (tmp_path / "py" / "openfoam" / "constant" / "polyMesh" / "boundary").read_text()
+    assert all(f"    {name}\n" in boundary for name in inlets)

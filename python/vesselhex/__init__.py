@@ -389,6 +389,7 @@ def mesh(
     max_memory: Optional[int] = None,
     progress: Union[bool, Callable[[str], Any]] = False,
     caps: Optional[Mapping[str, PathLike]] = None,
+    inlets: Sequence[Point] = (),
 ) -> Mesh:
     """Meshes a vessel, as ``vesselhex mesh`` does, and returns the :class:`Mesh` in memory.
 
@@ -412,7 +413,10 @@ def mesh(
         progress: ``True`` prints each stage on stderr; a function is called with each stage's name.
         caps: with a wall file as ``surface``, its caps in files of their own, by name, e.g.
             ``{"inlet": "inlet.stl", "outlet_lica": "lica.stl"}`` (as ``--cap NAME=FILE``): each
-            names the end it closes (OpenFOAM patch, sets, ``report["ends"]``).
+            names the end it closes (OpenFOAM patch, sets, ``report["ends"]``); caps named
+            ``inlet_<x>`` are inlets.
+        inlets: points near further ends that are inlets (a vessel fed through several ends,
+            as ``--inlet`` given more than once): each its own inlet, ``inlet_1``, ``inlet_2``, ...
 
     Raises:
         VesselhexError: ``InputError``, ``ConfigError``, ``GeometryError`` or ``FileError``, with
@@ -449,5 +453,6 @@ def mesh(
         max_memory=max_memory,
         progress=_progress(progress),
         caps=[(str(name), os.fspath(file)) for name, file in (caps or {}).items()],
+        inlets=[_point(p, "inlets") for p in inlets],
     )
     return Mesh(native)

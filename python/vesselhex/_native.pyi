@@ -63,6 +63,7 @@ def mesh(
     max_memory: Optional[int] = None,
     progress: Optional[Callable[[str], Any]] = None,
     caps: Sequence[Tuple[str, str]] = ...,
+    inlets: Sequence[Point] = ...,
 ) -> Mesh: ...
 def centerlines(
     *,

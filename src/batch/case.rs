@@ -51,6 +51,7 @@ fn request(case: &Case, settings: &Settings, config: MeshConfig, output: &Path) 
             ends: case.ends.iter().map(mm).collect(),
             sacs: case.sacs.iter().map(mm).collect(),
             caps: vec![],
+            inlet_names: vec![],
         },
         case_file: case.config.clone().or(settings.config.clone()),
         output: output.join(&case.name),
@@ -59,6 +60,7 @@ fn request(case: &Case, settings: &Settings, config: MeshConfig, output: &Path) 
         quiet: true,
         reproducible: settings.reproducible,
         warnings: vec![],
+        inlets: vec![],
         config,
     }
 }

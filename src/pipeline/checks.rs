@@ -63,6 +63,23 @@ pub(super) const UNIT_MISMATCH_FACTOR: f64 = 8.0;
 
 /// Checks that the centerline radius matches the distance from the centerline to the surface;
 /// a factor of 10, 100 or 1000 means the two files are in different units.
+/// A warning when the (cleaned) surface has loops ([`crate::io::input::topology::handles`]):
+/// vesselhex meshes trees, so each loop is cut open where the paths from the inlet meet around
+/// it (a ring of generated vessels: a gap of about a diameter, each side ending as at an end).
+pub(super) fn loop_warning(surface: &TriangleSurface) -> Option<Warning> {
+    let loops = crate::io::input::topology::handles(&surface.triangles).filter(|&n| n > 0)?;
+    Some(Warning::new(
+        "surface_loops",
+        format!(
+            "{}: the surface has {loops} loop(s) (a ring of vessels such as a circle of Willis, a graft rejoining its \
+             host, or two vessels fused where they touch): vesselhex meshes vessel trees, so each loop is cut open: a \
+             stretch of it is left out of the mesh, which ends on either side as at a vessel end; networks with loops \
+             are not meshed yet",
+            surface.source.display()
+        ),
+    ))
+}
+
 pub(super) fn check_units(surface: &LumenSurface, tree: &CenterlineTree, centerline_source: &Path) -> Result<()> {
     let samples: Vec<(Point3<f64>, f64)> = tree
         .branches

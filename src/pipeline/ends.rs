@@ -42,7 +42,7 @@ pub(super) const MESHED_END_BRANCH_RADII: f64 = 1.0;
 /// per mm).
 pub(super) fn end_reports(
     ends: &[VesselEnd],
-    inlet: usize,
+    inlets: &[bool],
     tree: &CenterlineTree,
     side_ends: &[[f64; 3]],
     scale: f64,
@@ -55,7 +55,7 @@ pub(super) fn end_reports(
             position: (e.centre.coords * scale).into(),
             radius: e.radius * scale,
             kind: e.kind.name(),
-            inlet: k == inlet,
+            inlet: inlets[k],
             meshed: side_ends.contains(&e.centre.into())
                 || terminals.iter().any(|t| {
                     (t.point - e.centre).norm() <= (MESHED_END_REACH * e.radius).max(MESHED_END_BRANCH_RADII * t.radius)
@@ -250,7 +250,7 @@ mod tests {
         let tree = CenterlineTree::build(&centerlines, &MeshConfig::default().centerline, None).unwrap();
         let end = |x: f64, z: f64, kind| VesselEnd { centre: Point3::new(x, 0.0, z), radius: 2.0, kind };
         let ends = [end(0.0, 0.0, EndKind::Open), end(0.0, 31.0, EndKind::Dome), end(20.0, 15.0, EndKind::Open)];
-        let reports = end_reports(&ends, 0, &tree, &[], 1.0);
+        let reports = end_reports(&ends, &[true, false, false], &tree, &[], 1.0);
         let meshed: Vec<bool> = reports.iter().map(|e| e.meshed).collect();
         assert_eq!(meshed, [true, true, false]);
         assert!(reports[0].inlet && !reports[1].inlet && reports[1].kind == "dome");

@@ -31,6 +31,7 @@ use crate::stages::additions::side_ends::SideOpening;
 use crate::stages::annotation::accuracy::surface_accuracy;
 use crate::stages::annotation::annotate::annotate;
 use crate::stages::annotation::end_names::name_mesh_ends;
+use crate::stages::annotation::inlets::{inlet_ends, mark_inlets, InletMark};
 use crate::stages::annotation::sacs::mark_junction_sacs;
 use crate::stages::centerline::extract::{names_of_ends, VesselEnd};
 use crate::stages::centerline::{Branch, CenterlineTree};
@@ -71,6 +72,9 @@ pub struct MeshRequest {
     pub reproducible: bool,
     /// Warnings found before the run (on the command line's settings), reported with the rest.
     pub warnings: Vec<Warning>,
+    /// Ends the user flags as inlets besides the one the tree is built from (see
+    /// [`crate::stages::annotation::inlets`]).
+    pub inlets: Vec<InletMark>,
 }
 
 /// Runs the whole job and returns the report (also written as report.json). The outputs are
@@ -111,6 +115,7 @@ pub fn run(request: &MeshRequest) -> Result<Report> {
         max_memory: request.max_memory,
         warnings: request.warnings.clone(),
         caps,
+        inlets: request.inlets.clone(),
     };
     let vessel = mesh_surface(surface, centerlines, settings, &mut progress)?;
     write_vessel(&vessel, config, output, request.reproducible, &mut progress)
@@ -130,12 +135,14 @@ pub fn mesh_surface(
 ) -> Result<MeshedVessel> {
     let config = &settings.config;
     checks::check_settings(config)?;
+    check_inlet_caps(&settings.inlets, &settings.caps)?;
     crate::pipeline::finishing::check_wall_surfaces(config)?;
     settings.warnings.extend(checks::settings_warnings(config));
     progress.stage("surface hygiene");
     let (surface, hygiene) = clean_surface(surface)?;
     settings.warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
-    let found = centerlines_of(&surface, centerlines, &settings.caps, progress)?;
+    settings.warnings.extend(checks::loop_warning(&surface));
+    let found = centerlines_of(&surface, centerlines, &settings.caps, &settings.inlets, progress)?;
     settings.warnings.extend(found.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
     let Found { centerlines, source: centerline_source, ends: found_ends, mut names, .. } = found;
     check_size(&surface, &centerlines, &centerline_source, &mut settings)?;
@@ -156,6 +163,8 @@ pub fn mesh_surface(
         names = names_of_ends(&ends, &settings.caps).map_err(|e| Error::input(&surface.source, e))?;
     }
     name_mesh_ends(&mut meshed.mesh, &ends, &names);
+    let inlets = inlet_ends(&ends, &names, inlet, &settings.inlets).map_err(Error::Config)?;
+    mark_inlets(&mut meshed.mesh, &ends, &inlets, &names);
     let openings = ends::side_openings(&surface, found_ends.as_ref().map_or(&[][..], |(e, _)| e), &short_branches);
     let limits = ReadLimits::within(settings.max_memory);
     let asked: Vec<SideOpening> = openings.iter().flatten().copied().collect();
@@ -173,12 +182,30 @@ pub fn mesh_surface(
         centerlines,
         ends,
         inlet,
+        inlets,
         end_names: names,
         hygiene,
         additions,
         settings,
         left_out_mm,
     })
+}
+
+/// Before anything is computed: every cap the user flags as an inlet by name is given.
+fn check_inlet_caps(marks: &[InletMark], caps: &[NamedCap]) -> Result<()> {
+    let given: Vec<&str> = caps.iter().map(|c| c.name.as_str()).collect();
+    for mark in marks {
+        if let InletMark::Cap(name) = mark {
+            if !given.contains(&name.as_str()) {
+                let given = if given.is_empty() { "none".to_string() } else { given.join(", ") };
+                return Err(Error::Config(format!(
+                    "--inlet {name}: no cap of that name is given (caps: {given}); name a cap given with --cap NAME=FILE \
+                     or in the surface's folder, or give a point x,y,z near the end"
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A vessel's centerlines, as given or extracted from its surface, with what the extraction
@@ -198,6 +225,7 @@ fn centerlines_of(
     surface: &TriangleSurface,
     centerlines: CenterlineSource,
     caps: &[NamedCap],
+    inlets: &[InletMark],
     progress: &mut Progress,
 ) -> Result<Found> {
     Ok(match centerlines {
@@ -209,6 +237,11 @@ fn centerlines_of(
             progress.stage("centerline extraction");
             if options.caps.is_empty() {
                 options.caps = caps.to_vec();
+            }
+            if options.inlet_names.is_empty() {
+                let named =
+                    inlets.iter().filter_map(|m| if let InletMark::Cap(n) = m { Some(n.clone()) } else { None });
+                options.inlet_names = named.collect();
             }
             let extraction = crate::stages::centerline::extract::extract_centerlines(surface, &options)?;
             Found {
@@ -263,6 +296,9 @@ pub struct MeshSettings {
     /// Caps given in files of their own (see [`crate::io::input::read_surface_parts`]): each names
     /// the end it closes or covers.
     pub caps: Vec<NamedCap>,
+    /// Ends the user flags as inlets besides the one the tree is built from (see
+    /// [`crate::stages::annotation::inlets`]).
+    pub inlets: Vec<InletMark>,
 }
 
 /// A vessel meshed and not yet written: the mesh and what its report needs. What `run` writes,
@@ -278,6 +314,8 @@ pub struct MeshedVessel {
     /// the inlet.
     pub ends: Vec<VesselEnd>,
     pub inlet: usize,
+    /// Whether each end is an inlet (parallel to `ends`): `inlet` and the ends flagged as inlets.
+    pub inlets: Vec<bool>,
     /// The name each end was given by a cap (parallel to `ends`).
     pub end_names: Vec<Option<String>>,
     /// What surface hygiene changed.

@@ -397,7 +397,7 @@ pub fn vessel_report(vessel: &MeshedVessel, config: &MeshConfig, timings: &[(Str
     let mut warnings = vessel.settings.warnings.clone();
     let side_ends: Vec<[f64; 3]> = vessel.additions.side_ends.iter().map(|s| s.centre).collect();
     let mut ends =
-        end_reports(&vessel.ends, vessel.inlet, &vessel.meshed.tree, &side_ends, config.output_units.from_mm());
+        end_reports(&vessel.ends, &vessel.inlets, &vessel.meshed.tree, &side_ends, config.output_units.from_mm());
     let mesh = &vessel.meshed.mesh;
     for ((report, at), given) in ends.iter_mut().zip(mesh_ends_at(mesh, &vessel.ends)).zip(&vessel.end_names) {
         report.name = at.map(|m| mesh.ends[m].name.clone()).or_else(|| given.clone());

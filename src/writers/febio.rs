@@ -665,12 +665,9 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
     let f = &cfg.fsi;
     let b = &cfg.blood;
     let inlets: Vec<_> = mesh.ends.iter().filter(|e| e.is_inlet).collect();
-    let [inlet] = inlets.as_slice() else {
-        return Err(Error::Geometry(format!(
-            "FEBio FSI: the mesh has {} inlet ends; the deck drives the flow through exactly one",
-            inlets.len()
-        )));
-    };
+    if inlets.is_empty() {
+        return Err(Error::Geometry("FEBio FSI: the mesh has no inlet".into()));
+    }
     let outlets: Vec<_> = mesh.outlets().collect();
     if outlets.is_empty() {
         return Err(Error::Geometry("FEBio FSI: the mesh has no outlet".into()));
@@ -709,7 +706,7 @@ fn write_fsi_deck(xml: &mut Xml, mesh: &VesselMesh, options: &WriteOptions) -> R
     mat_axes(xml, mesh);
 
     fsi_boundary(xml, mesh, &outlets, &lumen_inner_sets, extended, p_out);
-    fsi_loads(xml, inlet, &outlets, velocity, f.backflow_beta);
+    fsi_loads(xml, &inlets, &outlets, velocity, f.backflow_beta);
     xml.open("LoadData", &[]);
     load_curve(xml, 1, "inflow_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
     load_curve(xml, 2, "outlet_pressure_ramp", "LINEAR", &[(0.0, 0.0), (f.ramp_s, 1.0)]);
@@ -867,7 +864,7 @@ fn fsi_boundary(
 
 /// The deck's `Loads`: the fluid-FSI traction on the interface, the inlet's parabolic
 /// velocity and the outlets' backflow stabilization.
-fn fsi_loads(xml: &mut Xml, inlet: &VesselEnd, outlets: &[&VesselEnd], velocity: f64, backflow_beta: f64) {
+fn fsi_loads(xml: &mut Xml, inlets: &[&VesselEnd], outlets: &[&VesselEnd], velocity: f64, backflow_beta: f64) {
     xml.open("Loads", &[]);
     xml.open(
         "surface_load",
@@ -875,21 +872,23 @@ fn fsi_loads(xml: &mut Xml, inlet: &VesselEnd, outlets: &[&VesselEnd], velocity:
     );
     xml.leaf("shell_bottom", &[], "0");
     xml.close("surface_load");
-    let inlet_surface = sets::lumen_end(&inlet.name);
-    xml.open(
-        "surface_load",
-        &[
-            ("name", &format!("velocity_{}", inlet.name)),
-            ("surface", &inlet_surface),
-            ("type", "fluid normal velocity"),
-        ],
-    );
-    // measured along the facets' outward normal: inflow is negative
-    xml.leaf("velocity", &[("lc", "1")], &param(-velocity));
-    xml.leaf("prescribe_nodal_velocities", &[], "1");
-    xml.leaf("parabolic", &[], "1");
-    xml.leaf("prescribe_rim_pressure", &[], "1");
-    xml.close("surface_load");
+    for inlet in inlets {
+        let inlet_surface = sets::lumen_end(&inlet.name);
+        xml.open(
+            "surface_load",
+            &[
+                ("name", &format!("velocity_{}", inlet.name)),
+                ("surface", &inlet_surface),
+                ("type", "fluid normal velocity"),
+            ],
+        );
+        // measured along the facets' outward normal: inflow is negative
+        xml.leaf("velocity", &[("lc", "1")], &param(-velocity));
+        xml.leaf("prescribe_nodal_velocities", &[], "1");
+        xml.leaf("parabolic", &[], "1");
+        xml.leaf("prescribe_rim_pressure", &[], "1");
+        xml.close("surface_load");
+    }
     for end in outlets {
         let surf = sets::lumen_end(&end.name);
         xml.open(

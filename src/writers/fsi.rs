@@ -52,11 +52,10 @@
 
 use super::inp::{fmt_const, Dialect, EndHold, ModelData};
 use super::openfoam::{
-    end_vars, extension_wall_vars, inlet_velocities, lumen_polymesh, render, slab_axis, EndNames, PolyMesh,
+    end_vars, extension_wall_vars, inlet_fields, lumen_polymesh, render, slab_axis, EndNames, PolyMesh,
 };
 use super::text::{text_of, write_items, Text};
 use super::{write_atomic, WriteOptions};
-use crate::data::config::InletProfile;
 use crate::data::error::{Error, Result};
 use crate::data::units::LengthUnit;
 use crate::geometry::mesh::{face_nodes, quad_area_vector, sets, VesselMesh};
@@ -318,17 +317,8 @@ pub fn write_fsi_of(mesh: &VesselMesh, poly: &PolyMesh, options: &WriteOptions, 
 
     // Case values.
     let ends = EndNames::of(mesh)?;
-    let inlet = poly
-        .patch(&ends.inlet)
-        .ok_or_else(|| Error::Geometry(format!("FSI writer: no inlet patch '{}'", ends.inlet)))?;
-    let inflow = inlet_velocities(poly, inlet, &options.openfoam);
-    let u_max = inflow.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
-    let (dt, end) = timing(poly, options, u_max);
-    let mut u = format!("nonuniform List<vector>\n{}\n(\n", inflow.velocities.len());
-    for v in &inflow.velocities {
-        u.push_str(&format!("({:e} {:e} {:e})\n", v.x, v.y, v.z));
-    }
-    u.push(')');
+    let inflow = inlet_fields(poly, &ends, &options.openfoam)?;
+    let (dt, end) = timing(poly, options, inflow.max_speed);
     let mut end_patches = String::new();
     for end in ends.all() {
         end_patches.push_str(&render(END_PIECE.0, END_PIECE.1, &[("end", end.to_string())])?);
@@ -355,16 +345,8 @@ pub fn write_fsi_of(mesh: &VesselMesh, poly: &PolyMesh, options: &WriteOptions, 
         ("end_time", format!("{end:e}")),
         ("write_every", (windows / 10).max(1).to_string()),
         ("end_patches", end_patches),
-        ("inlet_velocity", u),
-        (
-            "profile",
-            match options.openfoam.profile {
-                InletProfile::Parabolic => "parabolic".into(),
-                InletProfile::Plug => "plug".into(),
-            },
-        ),
-        ("mean_velocity", format!("{:e}", inflow.flow_rate / inflow.area)),
-        ("flow_rate", format!("{:e}", inflow.flow_rate)),
+        ("inlets_U", inflow.entries),
+        ("inflow", inflow.summary),
         // fvSchemes of the flow case, transient.
         ("ddt_scheme", "Euler".into()),
         ("div_u_scheme", "Gauss linearUpwind grad(U)".into()),

@@ -34,11 +34,14 @@
 //! `Allrun` (`./Allrun N` runs on N MPI processes: decomposePar, the solver under mpirun,
 //! reconstructPar). The inlet
 //! velocity is written per inlet face ([`inlet_velocities`]): parabolic in the distance to the
-//! section boundary, or plug, scaled so that the inlet flux is exactly the flow rate asked.
+//! section boundary, or plug, scaled so that the inlet flux is exactly the flow rate asked
+//! ([`inlet_flow_rates`]: per inlet, `inlet_flow_rates_ml_s`, else its share by area of
+//! `flow_rate_ml_s`, else `mean_velocity` times its area).
 //! Every end of the mesh is its own patch with its own entry in `0/U` and `0/p` ([`EndNames`]):
-//! the inlet (its name from the mesh), then each outlet (`outlet`, or `outlet_1`, `outlet_2`, ...
-//! of a branched vessel), each rendered from `templates/openfoam/0/{U,p}.outlet`: zero-gradient
-//! velocity, pressure 0. Wall: no-slip.
+//! the inlets (`inlet`, or `inlet_1`, `inlet_2`, ... of a vessel fed through several ends, or
+//! their caps' names), each rendered from `templates/openfoam/0/{U,p}.inlet`, then each outlet
+//! (`outlet`, or `outlet_1`, `outlet_2`, ... of a branched vessel), each rendered from
+//! `templates/openfoam/0/{U,p}.outlet`: zero-gradient velocity, pressure 0. Wall: no-slip.
 //!
 //! A patch named `wall` of type `wall` makes OpenFOAM v1912 print a harmless "Removed patchGroup
 //! 'wall' which clashes with patch 2 of the same name" warning (the type puts every wall patch in
@@ -488,33 +491,36 @@ fn build(
     Ok(PolyMesh { points, faces, owner, neighbour, patches, cell_zones, face_zones, n_cells })
 }
 
-/// The end patches of the lumen, named as the mesh's ends: its one inlet, then every outlet in
-/// the mesh's order (`outlet`, or `outlet_1`, `outlet_2`, ... of a branched vessel).
+/// The end patches of the lumen, named as the mesh's ends: its inlets, then every outlet, each
+/// in the mesh's order (`inlet`, or `inlet_1`, ...; `outlet`, or `outlet_1`, `outlet_2`, ... of
+/// a branched vessel).
 #[derive(Debug, Clone, PartialEq)]
 pub struct EndNames {
-    pub inlet: String,
+    pub inlets: Vec<String>,
     pub outlets: Vec<String>,
 }
 
 impl EndNames {
-    /// Fails unless the mesh has exactly one inlet and at least one outlet (the case drives the
-    /// flow through one inlet).
+    /// Fails unless the mesh has an inlet and an outlet (the case drives the flow in through the
+    /// inlets and out through the outlets).
     pub fn of(mesh: &VesselMesh) -> Result<Self> {
-        let inlets: Vec<&str> = mesh.ends.iter().filter(|e| e.is_inlet).map(|e| e.name.as_str()).collect();
+        let inlets: Vec<String> = mesh.ends.iter().filter(|e| e.is_inlet).map(|e| e.name.clone()).collect();
         let outlets: Vec<String> = mesh.outlets().map(|e| e.name.clone()).collect();
-        match (inlets.as_slice(), outlets.is_empty()) {
-            ([inlet], false) => Ok(EndNames { inlet: inlet.to_string(), outlets }),
-            (_, true) => Err(Error::Geometry("OpenFOAM writer: the mesh has no outlet end".into())),
-            _ => Err(Error::Geometry(format!(
-                "OpenFOAM writer: the mesh has {} inlet ends ({}); the flow case needs exactly one",
-                inlets.len(),
-                inlets.join(", ")
-            ))),
+        if inlets.is_empty() {
+            return Err(Error::Geometry("OpenFOAM writer: the mesh has no inlet end".into()));
         }
+        if outlets.is_empty() {
+            return Err(Error::Geometry(format!(
+                "OpenFOAM writer: the mesh has no outlet end (every end is an inlet: {}); the flow needs a way out: \
+                 give fewer --inlet ends",
+                inlets.join(", ")
+            )));
+        }
+        Ok(EndNames { inlets, outlets })
     }
-    /// Inlet, then the outlets.
+    /// The inlets, then the outlets.
     pub fn all(&self) -> impl Iterator<Item = &str> {
-        std::iter::once(self.inlet.as_str()).chain(self.outlets.iter().map(|s| s.as_str()))
+        self.inlets.iter().chain(&self.outlets).map(|s| s.as_str())
     }
 }
 
@@ -796,12 +802,21 @@ const OUTLET_PIECES: &[(&str, &str, &str)] = &[
     ("outlets_U", "templates/openfoam/0/U.outlet", include_str!("../../templates/openfoam/0/U.outlet")),
     ("outlets_p", "templates/openfoam/0/p.outlet", include_str!("../../templates/openfoam/0/p.outlet")),
 ];
+/// The per-inlet entry of `0/p`, `{{inlet}}` = the inlet's patch name.
+const INLET_P: (&str, &str) = ("templates/openfoam/0/p.inlet", include_str!("../../templates/openfoam/0/p.inlet"));
+/// The per-inlet entry of `0/U`, `{{inlet}}` = the inlet's patch name, `{{inlet_velocity}}` its
+/// per-face velocities.
+const INLET_U: (&str, &str) = ("templates/openfoam/0/U.inlet", include_str!("../../templates/openfoam/0/U.inlet"));
 
-/// The end-patch values of the field templates: `inlet` (the inlet patch's name) and one entry
-/// per outlet for each field (`outlets_U`, `outlets_p`), so that each outlet has its own boundary
-/// condition.
+/// The end-patch values of the field templates: one entry per inlet in `0/p` (`inlets_p`; those
+/// of `0/U` carry the inflow: [`InletFields`]) and one per outlet for each field (`outlets_U`,
+/// `outlets_p`), so that each end has its own boundary condition.
 pub fn end_vars(ends: &EndNames) -> Result<Vec<(&'static str, String)>> {
-    let mut vars = vec![("inlet", ends.inlet.clone())];
+    let mut inlets_p = String::new();
+    for inlet in &ends.inlets {
+        inlets_p.push_str(&render(INLET_P.0, INLET_P.1, &[("inlet", inlet.clone())])?);
+    }
+    let mut vars = vec![("inlets_p", inlets_p)];
     for (key, label, piece) in OUTLET_PIECES {
         let mut text = String::new();
         for outlet in &ends.outlets {
@@ -846,13 +861,13 @@ pub struct Inflow {
 /// Per-face inlet velocities. Parabolic: u = u0 rho (2 - rho), rho = d / d_max with d the
 /// distance of the face centre to the boundary of the inlet section (its edges used by one
 /// inlet face only) and d_max the largest such distance over face centres and points (on a circle
-/// this is 1 - r^2/R^2). Plug: u = u0. u0 is set so that the flux through the faces is the flow
-/// rate: `flow_rate_ml_s`, or `mean_velocity` times the inlet area.
-pub fn inlet_velocities(poly: &PolyMesh, inlet: &Patch, config: &OpenFoamConfig) -> Inflow {
+/// this is 1 - r^2/R^2). Plug: u = u0. u0 is set so that the flux through the faces is
+/// `flow_rate` (m3/s).
+pub fn inlet_velocities(poly: &PolyMesh, inlet: &Patch, profile: InletProfile, flow_rate: f64) -> Inflow {
     let faces = inlet.range();
     let areas: Vec<Vector3<f64>> = faces.clone().map(|f| poly.face_area(f)).collect();
-    let area: f64 = areas.iter().map(|a| a.norm()).sum();
-    let shape: Vec<f64> = match config.profile {
+    let area = patch_area(poly, inlet);
+    let shape: Vec<f64> = match profile {
         InletProfile::Plug => vec![1.0; areas.len()],
         InletProfile::Parabolic => {
             let mut edges: Vec<(u32, u32)> = faces
@@ -893,11 +908,89 @@ pub fn inlet_velocities(poly: &PolyMesh, inlet: &Patch, config: &OpenFoamConfig)
                 .collect()
         }
     };
-    let flow_rate = config.flow_rate_ml_s.map(|q| q * 1e-6).unwrap_or(config.mean_velocity * area);
     let weighted: f64 = shape.iter().zip(&areas).map(|(s, a)| s * a.norm()).sum();
     let u0 = flow_rate / weighted;
     let velocities = areas.iter().zip(&shape).map(|(a, s)| (-a.normalize() * (u0 * s)).map(|x| x + 0.0)).collect();
     Inflow { flow_rate, area, velocities }
+}
+
+/// The area of a patch (m2 in a case written in metres).
+fn patch_area(poly: &PolyMesh, patch: &Patch) -> f64 {
+    patch.range().map(|f| poly.face_area(f).norm()).sum()
+}
+
+/// The flow rate of each inlet of `ends` (m3/s, in its order): its own
+/// `inlet_flow_rates_ml_s`, else its share by area of `flow_rate_ml_s` among the inlets without
+/// their own, else `mean_velocity` times its area. Fails on a rate given for an end that is no
+/// inlet.
+pub fn inlet_flow_rates(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Result<Vec<f64>> {
+    if let Some(name) = config.inlet_flow_rates_ml_s.keys().find(|n| !ends.inlets.contains(n)) {
+        return Err(Error::Config(format!(
+            "openfoam.inlet_flow_rates_ml_s: the mesh has no inlet named {name} (its inlets: {}); name the inlets as \
+             report.json does",
+            ends.inlets.join(", ")
+        )));
+    }
+    let areas = ends.inlets.iter().map(|name| inlet_patch(poly, name).map(|p| patch_area(poly, p)));
+    let areas: Vec<f64> = areas.collect::<Result<_>>()?;
+    let own = |name: &str| config.inlet_flow_rates_ml_s.get(name).map(|q| q * 1e-6);
+    let shared_area: f64 = ends.inlets.iter().zip(&areas).filter(|(n, _)| own(n).is_none()).map(|(_, a)| a).sum();
+    Ok(ends
+        .inlets
+        .iter()
+        .zip(&areas)
+        .map(|(name, &area)| {
+            own(name)
+                .or(config.flow_rate_ml_s.map(|q| q * 1e-6 * (area / shared_area)))
+                .unwrap_or(config.mean_velocity * area)
+        })
+        .collect())
+}
+
+fn inlet_patch<'a>(poly: &'a PolyMesh, name: &str) -> Result<&'a Patch> {
+    poly.patch(name).ok_or_else(|| Error::Geometry(format!("OpenFOAM writer: no inlet patch '{name}'")))
+}
+
+/// The inlets' part of `0/U`: an entry per inlet with its per-face velocities.
+pub struct InletFields {
+    /// The entries (`inlets_U`), rendered from `templates/openfoam/0/U.inlet`.
+    pub entries: String,
+    /// The inflow in words, for the file's header (`inflow`).
+    pub summary: String,
+    /// The flow rate through all the inlets, m3/s.
+    pub flow_rate: f64,
+    /// The largest inlet face speed, m/s.
+    pub max_speed: f64,
+}
+
+/// Each inlet's velocities at its flow rate ([`inlet_flow_rates`], [`inlet_velocities`]).
+pub fn inlet_fields(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Result<InletFields> {
+    let rates = inlet_flow_rates(poly, ends, config)?;
+    let profile = match config.profile {
+        InletProfile::Parabolic => "parabolic",
+        InletProfile::Plug => "plug",
+    };
+    let mut fields =
+        InletFields { entries: String::new(), summary: format!("{profile} profile"), flow_rate: 0.0, max_speed: 0.0 };
+    for (name, &rate) in ends.inlets.iter().zip(&rates) {
+        let inflow = inlet_velocities(poly, inlet_patch(poly, name)?, config.profile, rate);
+        let mut u = format!("nonuniform List<vector>\n{}\n(\n", inflow.velocities.len());
+        for v in &inflow.velocities {
+            u.push_str(&format!("({:e} {:e} {:e})\n", v.x, v.y, v.z));
+        }
+        u.push(')');
+        fields.entries.push_str(&render(INLET_U.0, INLET_U.1, &[("inlet", name.clone()), ("inlet_velocity", u)])?);
+        let figures = format!(
+            "mean velocity {} m/s, flow rate {} m3/s",
+            num(inflow.flow_rate / inflow.area),
+            num(inflow.flow_rate)
+        );
+        let several = ends.inlets.len() > 1;
+        fields.summary.push_str(&if several { format!("; {name}: {figures}") } else { format!(", {figures}") });
+        fields.flow_rate += inflow.flow_rate;
+        fields.max_speed = inflow.velocities.iter().map(|v| v.norm()).fold(fields.max_speed, f64::max);
+    }
+    Ok(fields)
 }
 
 fn num(x: f64) -> String {
@@ -929,15 +1022,7 @@ pub fn slab_axis(poly: &PolyMesh) -> (&'static str, impl Fn(&str) -> String) {
 
 /// Placeholder values of the case templates.
 fn case_vars(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Result<Vec<(&'static str, String)>> {
-    let inlet = poly
-        .patch(&ends.inlet)
-        .ok_or_else(|| Error::Geometry(format!("OpenFOAM writer: no inlet patch '{}'", ends.inlet)))?;
-    let inflow = inlet_velocities(poly, inlet, config);
-    let mut u = format!("nonuniform List<vector>\n{}\n(\n", inflow.velocities.len());
-    for v in &inflow.velocities {
-        u.push_str(&format!("({:e} {:e} {:e})\n", v.x, v.y, v.z));
-    }
-    u.push(')');
+    let inflow = inlet_fields(poly, ends, config)?;
     let (application, ddt, div_u, end_time, delta_t, write_control, write_interval, adjust) = match config.solver {
         FoamSolver::SimpleFoam => (
             "simpleFoam",
@@ -950,9 +1035,8 @@ fn case_vars(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Resul
             "no",
         ),
         FoamSolver::PimpleFoam => {
-            let u_max = inflow.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
             let end = config.end_time.unwrap_or(2.0 * poly.volume() / inflow.flow_rate);
-            let dt = 0.5 * min_centre_distance(poly) / u_max;
+            let dt = 0.5 * min_centre_distance(poly) / inflow.max_speed;
             (
                 "pimpleFoam",
                 "Euler",
@@ -982,16 +1066,8 @@ fn case_vars(poly: &PolyMesh, ends: &EndNames, config: &OpenFoamConfig) -> Resul
         ("write_interval", write_interval),
         ("adjust_time_step", adjust.into()),
         ("nu", num(config.nu)),
-        (
-            "profile",
-            match config.profile {
-                InletProfile::Parabolic => "parabolic".into(),
-                InletProfile::Plug => "plug".into(),
-            },
-        ),
-        ("mean_velocity", num(inflow.flow_rate / inflow.area)),
-        ("flow_rate", num(inflow.flow_rate)),
-        ("inlet_velocity", u),
+        ("inflow", inflow.summary),
+        ("inlets_U", inflow.entries),
     ]);
     Ok(vars)
 }
@@ -1313,8 +1389,7 @@ mod tests {
         let m = tube();
         let poly = lumen_polymesh(&m).unwrap();
         let inlet = poly.patch("inlet").unwrap();
-        let config = OpenFoamConfig { flow_rate_ml_s: Some(2.0), ..Default::default() };
-        let inflow = inlet_velocities(&poly, inlet, &config);
+        let inflow = inlet_velocities(&poly, inlet, InletProfile::Parabolic, 2e-6);
         let flux: f64 = inlet.range().zip(&inflow.velocities).map(|(f, u)| u.dot(&poly.face_area(f))).sum();
         assert!((flux + 2e-6).abs() < 1e-18, "{flux}");
         let speeds: Vec<f64> = inflow.velocities.iter().map(|v| v.norm()).collect();

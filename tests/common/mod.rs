@@ -83,6 +83,7 @@ pub fn coarse_settings() -> vesselhex::pipeline::MeshSettings {
         max_memory: vesselhex::io::memory::default_max_memory(),
         warnings: vec![],
         caps: vec![],
+        inlets: vec![],
     }
 }
 

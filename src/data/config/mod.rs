@@ -7,6 +7,7 @@
 use crate::data::error::{Error, Result};
 use crate::data::region::{Region, WallLayer};
 use crate::data::units::LengthUnit;
+use indexmap::IndexMap;
 use serde::{Deserialize, Serialize};
 
 pub mod fe;
@@ -430,8 +431,12 @@ pub enum FoamSolver {
 pub struct OpenFoamConfig {
     /// Mean inlet velocity, m/s.
     pub mean_velocity: f64,
-    /// Inlet volume flow rate, mL/s; when set, replaces `mean_velocity`.
+    /// Inlet volume flow rate, mL/s; when set, replaces `mean_velocity`. A vessel fed through
+    /// several inlets: their flow together, shared by area among the inlets not in
+    /// `inlet_flow_rates_ml_s`.
     pub flow_rate_ml_s: Option<f64>,
+    /// Flow rate of each inlet named (mL/s), as report.json names the ends (`inlet_1 = 2.5`).
+    pub inlet_flow_rates_ml_s: IndexMap<String, f64>,
     pub profile: InletProfile,
     pub solver: FoamSolver,
     /// Kinematic viscosity, m2/s (Newtonian blood: 3.5e-6).
@@ -449,6 +454,7 @@ impl Default for OpenFoamConfig {
         OpenFoamConfig {
             mean_velocity: 0.1,
             flow_rate_ml_s: None,
+            inlet_flow_rates_ml_s: IndexMap::new(),
             profile: InletProfile::Parabolic,
             solver: FoamSolver::SimpleFoam,
             nu: 3.5e-6,
@@ -469,6 +475,9 @@ impl OpenFoamConfig {
             if !(q > 0.0 && q.is_finite()) {
                 return bad("flow_rate_ml_s", "must be a positive flow rate in mL/s");
             }
+        }
+        if let Some((name, _)) = self.inlet_flow_rates_ml_s.iter().find(|(_, q)| !(**q > 0.0 && q.is_finite())) {
+            return bad(&format!("inlet_flow_rates_ml_s.{name}"), "must be a positive flow rate in mL/s");
         }
         if !(self.nu > 0.0 && self.nu.is_finite()) {
             return bad("nu", "must be a positive kinematic viscosity in m2/s");

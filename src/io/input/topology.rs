@@ -161,6 +161,47 @@ pub fn boundary_loops(triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
     loops
 }
 
+/// The loops of a manifold triangle surface, summed over its pieces: the genus g of each piece,
+/// from its Euler characteristic V - E + F = 2 - 2g - b (b its boundary loops). A vessel tree
+/// has none; a ring of vessels (a circle of Willis, a graft rejoining its host) has one per ring,
+/// and so have two vessels fused where they touch. None when an edge has three or more
+/// triangles or a boundary does not close (no genus to speak of).
+pub fn handles(triangles: &[[u32; 3]]) -> Option<usize> {
+    let neighbours = triangle_neighbours(triangles);
+    if neighbours.iter().flatten().any(|&n| n == NON_MANIFOLD) {
+        return None;
+    }
+    let vertices = triangles.iter().flatten().map(|&v| v as usize + 1).max().unwrap_or(0);
+    let mut piece: Vec<usize> = (0..vertices).collect();
+    fn root(piece: &mut [usize], mut v: usize) -> usize {
+        while piece[v] != v {
+            piece[v] = piece[piece[v]];
+            v = piece[v];
+        }
+        v
+    }
+    for t in triangles {
+        for k in 1..3 {
+            let (a, b) = (root(&mut piece, t[0] as usize), root(&mut piece, t[k] as usize));
+            piece[a.max(b)] = a.min(b);
+        }
+    }
+    let mut used = vec![false; vertices];
+    triangles.iter().flatten().for_each(|&v| used[v as usize] = true);
+    let v = used.iter().filter(|&&u| u).count() as i64;
+    let pieces = (0..vertices).filter(|&x| used[x] && root(&mut piece, x) == x).count() as i64;
+    let boundary_edges = neighbours.iter().flatten().filter(|&&n| n == BOUNDARY).count() as i64;
+    let f = triangles.len() as i64;
+    let e = (3 * f + boundary_edges) / 2;
+    let loops = boundary_loops(triangles);
+    if loops.iter().map(|l| l.len() as i64).sum::<i64>() != boundary_edges {
+        return None;
+    }
+    // Summed over the pieces: V - E + F = 2 pieces - 2 g - b.
+    let twice_g = 2 * pieces - loops.len() as i64 - (v - e + f);
+    Some((twice_g.max(0) / 2) as usize)
+}
+
 /// Centre of a loop weighted by edge length (VMTK's cap centre), and its vector area (the
 /// area of the fan from that centre, as a vector along the loop's right-hand normal).
 pub fn loop_centre_and_area(vertices: &[Point3<f64>], lp: &[u32]) -> (Point3<f64>, Vector3<f64>) {
@@ -251,6 +292,38 @@ mod tests {
         }
         t[2].swap(1, 2);
         (v, t)
+    }
+
+    /// A torus of `m` x `n` quads (each two triangles), wound consistently.
+    fn torus(m: u32, n: u32) -> Vec<[u32; 3]> {
+        let at = |i: u32, j: u32| (i % m) * n + j % n;
+        (0..m)
+            .flat_map(|i| {
+                (0..n).flat_map(move |j| {
+                    [[at(i, j), at(i + 1, j), at(i + 1, j + 1)], [at(i, j), at(i + 1, j + 1), at(i, j + 1)]]
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn handles_count_the_loops_of_each_piece() {
+        let (_, mut tube) = tube();
+        orient_consistently(&mut tube);
+        assert_eq!(handles(&tube), Some(0), "an open tube");
+        assert_eq!(handles(&torus(8, 6)), Some(1), "a ring");
+        // Two rings in one file, the second's vertices after the first's, and the tube beside them.
+        let mut two: Vec<[u32; 3]> = torus(8, 6);
+        two.extend(torus(5, 4).iter().map(|t| t.map(|v| v + 48)));
+        two.extend(tube.iter().map(|t| t.map(|v| v + 68)));
+        assert_eq!(handles(&two), Some(2));
+        // A ring cut open across (one band of quads left out) is a bent tube: no loop.
+        let cut: Vec<[u32; 3]> = torus(8, 6).into_iter().skip(12).collect();
+        assert_eq!(handles(&cut), Some(0));
+        // Three triangles on one edge: no genus to speak of.
+        let mut fin = torus(8, 6);
+        fin.push([0, 6, 100]);
+        assert_eq!(handles(&fin), None);
     }
 
     #[test]

@@ -44,13 +44,14 @@ pub fn name_mesh_ends(mesh: &mut VesselMesh, ends: &[VesselEnd], names: &[Option
             finals[m] = (1..).map(|k| format!("outlet_{k}")).find(|f| !finals.contains(f)).expect("a free name");
         }
     }
-    let changed: Vec<(String, String)> = mesh
-        .ends
-        .iter()
-        .zip(&finals)
-        .filter(|(e, f)| e.name != **f)
-        .map(|(e, f)| (e.name.clone(), f.clone()))
-        .collect();
+    rename_ends(mesh, &finals)
+}
+
+/// Gives each mesh end its name in `finals` (parallel to `mesh.ends`), its sets renamed with
+/// it. Returns the names changed (old, new), in mesh order.
+pub(super) fn rename_ends(mesh: &mut VesselMesh, finals: &[String]) -> Vec<(String, String)> {
+    let changed: Vec<(String, String)> =
+        mesh.ends.iter().zip(finals).filter(|(e, f)| e.name != **f).map(|(e, f)| (e.name.clone(), f.clone())).collect();
     // In two steps, through names no end has, so that a name may pass from one end to another.
     let parked: Vec<(String, String)> =
         changed.iter().enumerate().map(|(k, (old, _))| (old.clone(), format!("\u{1}renaming_{k}"))).collect();

@@ -88,8 +88,14 @@ const MARCH_PATIENCE: usize = 4;
 const FAR_FROM_SURFACE: f64 = 2.0;
 /// A blunt face within this many radii (its own or an end's) of an end found is that end's tip.
 const BLUNT_SAME_END: f64 = 3.0;
-/// A cap of this name is the inlet (unless `--inlet` chooses another end).
+/// A cap of this name is the inlet (unless `--inlet` chooses another end); a cap whose name
+/// starts with it and `_` (`inlet_svc`) is an inlet too.
 pub const INLET_NAME: &str = "inlet";
+
+/// Whether a cap's name makes its end an inlet (see [`INLET_NAME`]).
+pub fn is_inlet_name(name: &str) -> bool {
+    name.strip_prefix(INLET_NAME).is_some_and(|rest| rest.is_empty() || rest.starts_with('_'))
+}
 /// Two largest ends closer than this ratio make the automatic inlet choice worth a note.
 const AMBIGUOUS_INLET: f64 = 0.9;
 
@@ -106,11 +112,14 @@ pub struct ExtractOptions {
     /// one (tagged) is an end whatever its shape, in place of the flat caps the search would
     /// find, and every one names the end it closes or covers.
     pub caps: Vec<NamedCap>,
+    /// Names of caps the user flags as inlets (`--inlet NAME`), in the order given: with the
+    /// inlet [`InletChoice::Largest`], the first that closes an end is the inlet.
+    pub inlet_names: Vec<String>,
 }
 
 impl Default for ExtractOptions {
     fn default() -> Self {
-        ExtractOptions { inlet: InletChoice::Largest, ends: vec![], sacs: vec![], caps: vec![] }
+        ExtractOptions { inlet: InletChoice::Largest, ends: vec![], sacs: vec![], caps: vec![], inlet_names: vec![] }
     }
 }
 
@@ -161,8 +170,7 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
         ));
     }
     let end_names = ends::names_of_ends(&found, &options.caps).map_err(|e| Error::input(&surface.source, e))?;
-    // A cap named inlet is the inlet, unless the user chose another.
-    let named_inlet = end_names.iter().position(|n| n.as_deref() == Some(INLET_NAME));
+    let named_inlet = named_inlet(&found, &end_names, &options.inlet_names);
     let inlet = match (options.inlet, named_inlet) {
         (InletChoice::Largest, Some(k)) => k,
         (choice, _) => ends::choose_inlet(&found, choice),
@@ -173,6 +181,19 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
     let polylines = trace(&graph, &found, &end_nodes, inlet, &lumen)?;
     let centerlines = Centerlines { polylines, source: surface.source.clone() };
     Ok(Extraction { centerlines, ends: found, inlet, end_names, holes, notes })
+}
+
+/// The end a cap's name makes the inlet, unless the user chose another by a point: the first
+/// cap flagged by name (`inlet_names`), else the cap named [`INLET_NAME`], else the largest end
+/// whose cap is named as an inlet (`inlet_<x>`).
+fn named_inlet(found: &[VesselEnd], end_names: &[Option<String>], inlet_names: &[String]) -> Option<usize> {
+    let named = |want: &str| end_names.iter().position(|n| n.as_deref() == Some(want));
+    let inlet_like = (0..found.len()).filter(|&k| end_names[k].as_deref().is_some_and(is_inlet_name));
+    inlet_names
+        .iter()
+        .find_map(|want| named(want))
+        .or_else(|| named(INLET_NAME))
+        .or_else(|| inlet_like.max_by(|&a, &b| found[a].radius.total_cmp(&found[b].radius).then(b.cmp(&a))))
 }
 
 /// A note when the two largest ends have nearly the same radius (see [`AMBIGUOUS_INLET`]).
