@@ -73,7 +73,8 @@ pub fn scaled_jacobian_unless_below_from(c: &[Point3<f64>; 8], floor: f64, hint:
                 break;
             }
             let [ea, eb, ed] = CORNER_EDGES[i];
-            let q = det_unit(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i], [lengths[ea], lengths[eb], lengths[ed]]);
+            let q =
+                det_unit(c[nb[0]] - c[i], c[nb[1]] - c[i], c[nb[2]] - c[i], [lengths[ea], lengths[eb], lengths[ed]]);
             if q < min || (min.is_nan() && !q.is_nan()) {
                 at = i + 1;
             }
@@ -124,7 +125,8 @@ fn det_unit(a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>, lengths: [f64; 3]
 /// edges leaving corner `term - 1` in right-handed order.
 #[inline(always)]
 fn scaled_jacobian_term(c: &[Point3<f64>; 8], term: usize) -> f64 {
-    let det_unit = |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>| det_unit(a, b, d, [a.norm(), b.norm(), d.norm()]);
+    let det_unit =
+        |a: Vector3<f64>, b: Vector3<f64>, d: Vector3<f64>| det_unit(a, b, d, [a.norm(), b.norm(), d.norm()]);
     if term == 0 {
         let sum = |idx: [usize; 4]| idx.iter().fold(Vector3::zeros(), |acc, &i| acc + c[i].coords);
         let x1 = sum([1, 2, 5, 6]) - sum([0, 3, 4, 7]);

@@ -42,9 +42,35 @@ pub enum Attach {
     Inlet(usize),
 }
 
+/// Where an outlet splits into two (a side-branch tree of two ends): each daughter's radius
+/// over the outlet's end radius, branch angle from the outlet's tangent (radians), on opposite
+/// sides at `azimuth`; their tortuosity and body lengths in radii.
+#[derive(Debug, Clone)]
+pub struct SplitPlan {
+    pub ratios: [f64; 2],
+    pub angles: [f64; 2],
+    pub azimuth: f64,
+    pub tortuosity: [f64; 2],
+    pub body_radii: [f64; 2],
+}
+
+impl SplitPlan {
+    /// Daughters of 0.7 to 0.95 of the outlet's end radius at 30° to 70° from it, bodies of 3 to
+    /// 8 radii (each uniform).
+    fn draw(rng: &mut SeededRng) -> Self {
+        SplitPlan {
+            ratios: [rng.range(0.7, 0.95), rng.range(0.7, 0.95)],
+            angles: [rng.range(30.0f64, 70.0).to_radians(), rng.range(30.0f64, 70.0).to_radians()],
+            azimuth: rng.range(0.0, TAU),
+            tortuosity: [rng.uniform(), rng.uniform()],
+            body_radii: [rng.range(3.0, 8.0), rng.range(3.0, 8.0)],
+        }
+    }
+}
+
 /// One branch of a ring: where, its radius over its host's there, branch angle and azimuth
 /// (radians; the azimuth about the host's tangent from the ring's outward radial towards its
-/// up), taper, tortuosity, body length in radii, and a label.
+/// up), taper, tortuosity, body length in radii, a label, and whether it splits.
 #[derive(Debug, Clone)]
 pub struct BranchPlan {
     pub at: Attach,
@@ -55,6 +81,7 @@ pub struct BranchPlan {
     pub tortuosity: f64,
     pub body_radii: f64,
     pub label: &'static str,
+    pub split: Option<SplitPlan>,
 }
 
 /// A ring's draws: its vertices (counter-clockwise about `up`), radii at them and mid-arc, its
@@ -126,11 +153,12 @@ impl RingPlan {
             tortuosity: rng.uniform(),
             body_radii: rng.range(6.0, 14.0),
             label: "",
+            split: None,
         }
     }
 
-    /// An outlet: 0.5 to 0.9 of its host's radius, above the ring at a vertex, anywhere round
-    /// an inlet at 30-80° from its flow.
+    /// An outlet: 0.5 to 0.9 of its host's radius, above the ring at a vertex (splitting into
+    /// two with probability 0.25), anywhere round an inlet at 30-80° from its flow.
     fn draw_outlet(rng: &mut SeededRng, at: Attach) -> BranchPlan {
         let (theta, phi) = match at {
             Attach::Vertex(_) => (rng.range(60.0f64, 120.0), rng.range(10.0f64, 80.0)),
@@ -145,6 +173,10 @@ impl RingPlan {
             tortuosity: rng.uniform(),
             body_radii: rng.range(4.0, 12.0),
             label: "",
+            split: match at {
+                Attach::Vertex(_) if rng.chance(0.25) => Some(SplitPlan::draw(rng)),
+                _ => None,
+            },
         }
     }
 
@@ -155,7 +187,10 @@ impl RingPlan {
             Attach::Vertex(v) => self.radii[v],
             Attach::Inlet(i) => self.radii[vertex_of(&self.inlets[i])] * self.inlets[i].ratio,
         };
-        let outlets = self.outlets.iter().map(|b| host(b) * b.ratio * (1.0 - b.taper));
+        let outlets = self.outlets.iter().map(|b| {
+            let daughters = b.split.as_ref().map_or(1.0, |sp| sp.ratios[0].min(sp.ratios[1]));
+            host(b) * b.ratio * (1.0 - b.taper) * daughters
+        });
         outlets.fold(ring, f64::min)
     }
 
@@ -170,6 +205,13 @@ impl RingPlan {
                 "taper": b.taper,
                 "tortuosity": b.tortuosity,
                 "body_radii": b.body_radii,
+                "split": b.split.as_ref().map(|sp| json!({
+                    "radius_ratios": sp.ratios,
+                    "branch_angles_deg": sp.angles.map(f64::to_degrees),
+                    "azimuth_deg": sp.azimuth.to_degrees(),
+                    "tortuosity": sp.tortuosity,
+                    "body_radii": sp.body_radii,
+                })),
             })
         };
         let mut m = Map::new();
@@ -196,7 +238,8 @@ pub fn lay_ring(rng: &mut SeededRng, plan: &RingPlan, end_style: &str) -> Result
     let mut net = Network::new(plan.shape.name(), plan.floor(), plan.draws(end_style));
     let (samples, at) = ring(&plan.vertices, &plan.radii, &plan.middles)
         .ok_or_else(|| "a ring arc bends tighter than 1.5 radii".to_string())?;
-    let centre = Point3::from(plan.vertices.iter().map(|p| p.coords).sum::<Vector3<f64>>() / plan.vertices.len() as f64);
+    let centre =
+        Point3::from(plan.vertices.iter().map(|p| p.coords).sum::<Vector3<f64>>() / plan.vertices.len() as f64);
     net.tubes.push(Tube {
         name: "ring".into(),
         samples,
@@ -214,14 +257,17 @@ pub fn lay_ring(rng: &mut SeededRng, plan: &RingPlan, end_style: &str) -> Result
     let mut inlet_tubes = Vec::new();
     for (i, b) in plan.inlets.iter().enumerate() {
         let side = plan.outlets.iter().any(|o| o.at == Attach::Inlet(i));
-        let name = format!("inlet_{}", i + 1);
-        inlet_tubes.push(lay_at_vertex(rng, &mut net, &centre, b, name, (true, side))?);
+        let name = format!("inlet_vessel_{}", i + 1);
+        inlet_tubes.push(lay_at_vertex(rng, &mut net, &centre, b, name, (true, side, false))?);
     }
     for (k, b) in plan.outlets.iter().enumerate() {
-        let name = format!("outlet_{}", k + 1);
+        let name = format!("outlet_vessel_{}", k + 1);
         match b.at {
             Attach::Vertex(_) => {
-                lay_at_vertex(rng, &mut net, &centre, b, name, (false, false))?;
+                let id = lay_at_vertex(rng, &mut net, &centre, b, name.clone(), (false, false, b.split.is_none()))?;
+                if let Some(sp) = &b.split {
+                    lay_split(rng, &mut net, id, sp, &name)?;
+                }
             }
             Attach::Inlet(i) => lay_side_branch(rng, &mut net, inlet_tubes[i], b, name)?,
         }
@@ -231,14 +277,15 @@ pub fn lay_ring(rng: &mut SeededRng, plan: &RingPlan, end_style: &str) -> Result
 }
 
 /// Lays branch `b` from its ring vertex: its direction from the ring's tangent there and its
-/// outward radial (from the ring's centre) and up; `(inlet, side_room)` as [`BranchSpec`]'s.
+/// outward radial (from the ring's centre) and up; `(inlet, side_room, free_end)` as
+/// [`BranchSpec`]'s.
 fn lay_at_vertex(
     rng: &mut SeededRng,
     net: &mut Network,
     centre: &Point3<f64>,
     b: &BranchPlan,
     name: String,
-    (inlet, side_room): (bool, bool),
+    (inlet, side_room, free_end): (bool, bool, bool),
 ) -> Result<usize, String> {
     let v = vertex_of(b);
     let host = sample_at(&net.tubes[0].samples, net.junctions[v].on[0].1);
@@ -252,6 +299,7 @@ fn lay_at_vertex(
         body_radii: b.body_radii,
         inlet,
         side_room,
+        free_end,
         label: b.label,
         name,
     };
@@ -260,7 +308,13 @@ fn lay_at_vertex(
 }
 
 /// Lays outlet `b` off the middle of the straight stretch laid for it on inlet tube `inlet`.
-fn lay_side_branch(rng: &mut SeededRng, net: &mut Network, inlet: usize, b: &BranchPlan, name: String) -> Result<(), String> {
+fn lay_side_branch(
+    rng: &mut SeededRng,
+    net: &mut Network,
+    inlet: usize,
+    b: &BranchPlan,
+    name: String,
+) -> Result<(), String> {
     let s = net.tubes[inlet].side_anchor.ok_or_else(|| format!("{name}: its inlet has no room"))?;
     let host = sample_at(&net.tubes[inlet].samples, s);
     let j = net.add_junction(inlet, &host);
@@ -272,11 +326,36 @@ fn lay_side_branch(rng: &mut SeededRng, net: &mut Network, inlet: usize, b: &Bra
         body_radii: b.body_radii,
         inlet: false,
         side_room: false,
+        free_end: true,
         label: b.label,
         name,
     };
     let what = spec.name.clone();
     net.lay_branch(rng, j, &host, spec).map(|_| ()).ok_or_else(|| format!("{what} cannot clear its junction"))
+}
+
+/// Splits outlet tube `parent` at its end into the two daughters of `sp` (a terminal junction,
+/// as a tree's Y).
+fn lay_split(rng: &mut SeededRng, net: &mut Network, parent: usize, sp: &SplitPlan, name: &str) -> Result<(), String> {
+    let samples = &net.tubes[parent].samples;
+    let q = samples[samples.len() - 1];
+    let j = net.add_junction(parent, &q);
+    for i in 0..2 {
+        let spec = BranchSpec {
+            radius: sp.ratios[i] * q.r,
+            direction: direction_from(&q.t, &q.n, sp.angles[i], sp.azimuth + i as f64 * PI),
+            taper: 0.0,
+            tortuosity: sp.tortuosity[i],
+            body_radii: sp.body_radii[i],
+            inlet: false,
+            side_room: false,
+            free_end: true,
+            label: "",
+            name: format!("{name}.{}", i + 1),
+        };
+        net.lay_branch(rng, j, &q, spec).ok_or_else(|| format!("{name}.{}: cannot clear its junction", i + 1))?;
+    }
+    Ok(())
 }
 
 /// The circle of Willis (see the module documentation): seven ring vertices counter-clockwise
@@ -314,6 +393,7 @@ pub fn willis_plan(rng: &mut SeededRng) -> RingPlan {
         tortuosity: rng.range(0.0, 0.6),
         body_radii: rng.range(8.0, 12.0),
         label,
+        split: None,
     };
     let inlets = vec![
         branch(1, 1.15, 90.0, -75.0, "right internal carotid artery"),
@@ -418,7 +498,13 @@ pub fn lay_graft(rng: &mut SeededRng, plan: &GraftPlan, end_style: &str) -> Resu
 
 /// The graft itself: from the host's first anchor at the first angle, an arch, into the second
 /// anchor at the second angle, on the side of the drawn azimuth.
-fn lay_graft_vessel(net: &mut Network, plan: &GraftPlan, anchors: [f64; 2], stretch: [f64; 2], r: f64) -> Result<(), String> {
+fn lay_graft_vessel(
+    net: &mut Network,
+    plan: &GraftPlan,
+    anchors: [f64; 2],
+    stretch: [f64; 2],
+    r: f64,
+) -> Result<(), String> {
     let host = [0, 1].map(|i| sample_at(&net.tubes[0].samples, anchors[i]));
     let out = direction_from(&host[0].t, &host[0].n, plan.angles[0], plan.azimuth);
     let side = (out - host[0].t * plan.angles[0].cos()) / plan.angles[0].sin();
@@ -433,7 +519,14 @@ fn lay_graft_vessel(net: &mut Network, plan: &GraftPlan, anchors: [f64; 2], stre
     let samples = b.finish(|_| r);
     let k = net.blend_width(r);
     let inner = r + k + net.gap_min;
-    let zone = |a: Point3<f64>, tip: Point3<f64>| Zone { a, b: tip, inner, outer: inner + r.max(2.0 * net.h), k, partners: Vec::new() };
+    let zone = |a: Point3<f64>, tip: Point3<f64>| Zone {
+        a,
+        b: tip,
+        inner,
+        outer: inner + r.max(2.0 * net.h),
+        k,
+        partners: Vec::new(),
+    };
     let length = samples.last().map_or(0.0, |q| q.s);
     let zones = vec![zone(host[0].p, host[0].p + out * stretch[0]), zone(host[1].p, host[1].p - arrive * stretch[1])];
     let mut draws = Map::new();

@@ -87,13 +87,13 @@ impl RandomNetwork {
         let net = &self.network;
         let junctions = net.junctions.iter().enumerate().map(|(id, j)| {
             let node = Node::Junction(id);
-            let segments: Vec<usize> =
-                (0..self.segments.len()).filter(|&i| self.segments[i].from == node || self.segments[i].to == node).collect();
-            let on: Vec<Value> = j
-                .on
-                .iter()
-                .map(|&(tube, s, reach)| json!({"vessel": tube, "arc_length_mm": s, "reach_mm": reach}))
+            let segments: Vec<usize> = (0..self.segments.len())
+                .filter(|&i| self.segments[i].from == node || self.segments[i].to == node)
                 .collect();
+            let on: Vec<Value> =
+                j.on.iter()
+                    .map(|&(tube, s, reach)| json!({"vessel": tube, "arc_length_mm": s, "reach_mm": reach}))
+                    .collect();
             json!({"id": id, "centre": [j.point.x, j.point.y, j.point.z], "vessels": on, "segments": segments})
         });
         json!(junctions.collect::<Vec<_>>())

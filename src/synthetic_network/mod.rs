@@ -44,7 +44,10 @@
 //!   inlet's flow, any azimuth). Each 0.5 to 0.9 of its host's radius, tapering by up to 30 %,
 //!   at a vertex at a branch angle uniform in [60°, 120°] and an azimuth in [10°, 80°] (above
 //!   the ring); a body of 4 to 12 radii (the tree's daughters'), tortuosity uniform in [0, 1].
-//!   One loop.
+//!   An outlet at a vertex splits at its end into two with probability 0.25 (a side-branch
+//!   tree of two ends, as a tree's Y): daughters of 0.7 to 0.95 of its end radius, at 30° to
+//!   70° from it on opposite sides, bodies of 3 to 8 radii, no taper. So a ring has 1 to 6
+//!   outlet branches and up to 12 outlets. One loop.
 //! * Graft: a host from its inlet (radius log-uniform in [0.5, 4] mm, taper uniform in [0,
 //!   30 %]): 2 straight radii, a tortuous body of 3 to 8 radii, a straight stretch holding both
 //!   anchors, a tortuous body of 3 to 8 radii, 2 straight radii to its outlet. The graft (0.5 to
@@ -217,7 +220,12 @@ impl RandomNetwork {
             .map(|(id, (pts, rs))| {
                 let mut cell_tags = IndexMap::new();
                 cell_tags.insert("SegmentIds".to_string(), id as i64);
-                CenterlinePolyline { points: pts.iter().map(|p| p.0).collect(), radii: Some(rs), normals: None, cell_tags }
+                CenterlinePolyline {
+                    points: pts.iter().map(|p| p.0).collect(),
+                    radii: Some(rs),
+                    normals: None,
+                    cell_tags,
+                }
             })
             .collect();
         Ok(Centerlines { polylines, source: PathBuf::from(format!("{} (synthetic)", self.name)) })
@@ -265,7 +273,8 @@ pub fn write_random_network(
     let s = &network.surface;
     match format {
         SurfaceFormat::Stl => {
-            let header = format!("vesselhex {}: mm, outward normals, {} ends", network.name, network.network.ends.len());
+            let header =
+                format!("vesselhex {}: mm, outward normals, {} ends", network.name, network.network.ends.len());
             crate::synthetic::write_binary_stl(&surface, &header, &s.vertices, &s.triangles)?;
         }
         SurfaceFormat::Vtp => write_surface_vtp(&surface, &s.vertices, &s.triangles)?,

@@ -95,7 +95,11 @@ impl Network {
     /// The end's circle in its plane, with the clip zone the tree generator gives its ends.
     pub fn end_circle(&self, end: &End) -> EndCircle {
         let tube = &self.tubes[end.tube];
-        let (q, sign) = if end.at_start { (tube.samples[0], -1.0) } else { (*tube.samples.last().unwrap_or(&tube.samples[0]), 1.0) };
+        let (q, sign) = if end.at_start {
+            (tube.samples[0], -1.0)
+        } else {
+            (*tube.samples.last().unwrap_or(&tube.samples[0]), 1.0)
+        };
         EndCircle {
             centre: q.p,
             outward: q.t * sign,

@@ -30,6 +30,8 @@ pub struct BranchSpec {
     pub inlet: bool,
     /// Lay a straight stretch of four radii in the middle of the body, to take a side branch.
     pub side_room: bool,
+    /// Its far end is a free end (else a junction where the branch splits).
+    pub free_end: bool,
 }
 
 impl Network {
@@ -63,7 +65,14 @@ impl Network {
     }
 
     /// Adds a free end of tube `tube`.
-    pub fn add_end(&mut self, rng: &mut SeededRng, tube: usize, at_start: bool, inlet: bool, label: &'static str) -> usize {
+    pub fn add_end(
+        &mut self,
+        rng: &mut SeededRng,
+        tube: usize,
+        at_start: bool,
+        inlet: bool,
+        label: &'static str,
+    ) -> usize {
         let capped = self.draw_capped(rng);
         let count = self.ends.iter().filter(|e| e.inlet == inlet).count();
         let name = format!("{}_{}", if inlet { "inlet" } else { "outlet" }, count + 1);
@@ -92,7 +101,13 @@ impl Network {
     /// junction, a tortuous body, two straight radii; an inlet's samples are then reversed, so
     /// that they run from its free end to the junction. Returns the tube's id, or `None` when it
     /// cannot clear the junction.
-    pub fn lay_branch(&mut self, rng: &mut SeededRng, junction: usize, host: &Sample, spec: BranchSpec) -> Option<usize> {
+    pub fn lay_branch(
+        &mut self,
+        rng: &mut SeededRng,
+        junction: usize,
+        host: &Sample,
+        spec: BranchSpec,
+    ) -> Option<usize> {
         let r = spec.radius;
         let stretch = self.junction_stretch(junction, host, &spec.direction, r)?;
         let k = self.blend_width(r);
@@ -157,11 +172,13 @@ impl Network {
             side_anchor,
             draws,
         });
-        let end = self.add_end(rng, id, spec.inlet, spec.inlet, spec.label);
-        if spec.inlet {
-            self.tubes[id].start_end = Some(end);
-        } else {
-            self.tubes[id].end_end = Some(end);
+        if spec.inlet || spec.free_end {
+            let end = self.add_end(rng, id, spec.inlet, spec.inlet, spec.label);
+            if spec.inlet {
+                self.tubes[id].start_end = Some(end);
+            } else {
+                self.tubes[id].end_end = Some(end);
+            }
         }
         Some(id)
     }

@@ -14,7 +14,9 @@
 //! component's blend width inside its zone (around its junction's contact, or its sac's neck)
 //! and falls smoothly to 0 outside: a daughter is filleted into its host and siblings at the
 //! junction only, and walls that merely pass each other (at least two cells apart, checked when
-//! the tree is laid) meet as a plain minimum, so they never fuse.
+//! the tree is laid) meet as a plain minimum, so they never fuse. A component may have several
+//! zones (a network's graft joins its host at both ends, [`crate::synthetic_network`]): the
+//! widest at a point acts there.
 //!
 //! Evaluation is local: segments are bucketed in the grid's bricks, each brick holding the
 //! segments that come within `band` of it (four cells plus 2.2 blend widths past their radius);

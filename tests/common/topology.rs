@@ -150,11 +150,7 @@ pub fn ends_where_the_truth_says(
                 }
             }
             let disc = std::f64::consts::PI * r * r;
-            assert!(
-                (area / disc - 1.0).abs() < 0.1,
-                "{what}: end {}: cap area {area}, circle {disc}",
-                end["id"]
-            );
+            assert!((area / disc - 1.0).abs() < 0.1, "{what}: end {}: cap area {area}, circle {disc}", end["id"]);
         }
     }
     assert!(loop_used.iter().all(|&u| u), "{what}: a boundary loop belongs to no end");
