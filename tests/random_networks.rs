@@ -85,7 +85,7 @@ fn each_network_is_one_outward_manifold_whose_genus_is_its_loop_count_with_its_e
         let net = generate(seed, forced);
         let what = format!("{} (seed {seed})", net.name);
         let s = &net.surface;
-        let manifest = net.manifest("s", "c");
+        let manifest = serde_json::to_value(net.manifest("s", "c")).unwrap();
         let ends = manifest["ends"].as_array().unwrap();
         let open = ends.iter().filter(|e| e["kind"] == "open").count();
         let loops = boundary_loops(&s.triangles);

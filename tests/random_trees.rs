@@ -9,7 +9,6 @@ mod common;
 
 use common::topology::{boundary_loops, closed_volume6, ends_where_the_truth_says, pieces};
 use common::{path_str, temp_dir, vesselhex};
-use nalgebra::{Point3, Vector3};
 use std::process::Command;
 use vesselhex::input::{read_centerlines, read_surface};
 use vesselhex::progress::Progress;

@@ -84,15 +84,14 @@ pub struct BranchPlan {
     pub split: Option<SplitPlan>,
 }
 
-/// A ring's draws: its vertices (counter-clockwise about `up`), radii at them and mid-arc, its
-/// inlets and outlets.
+/// A ring's draws: its vertices (counter-clockwise about the up of its branches' azimuths), radii
+/// at them and mid-arc, its inlets and outlets.
 #[derive(Debug, Clone)]
 pub struct RingPlan {
     pub shape: Shape,
     pub vertices: Vec<Point3<f64>>,
     pub radii: Vec<f64>,
     pub middles: Vec<f64>,
-    pub up: Vector3<f64>,
     pub inlets: Vec<BranchPlan>,
     pub outlets: Vec<BranchPlan>,
 }
@@ -127,7 +126,6 @@ impl RingPlan {
                 Point3::from(rotation * local)
             })
             .collect();
-        let up = rotation * Vector3::z();
         let inlet_vertices = choose(rng, n, inlet_count);
         let inlets = inlet_vertices.iter().map(|&v| Self::draw_inlet(rng, v)).collect();
         let free: Vec<usize> = (0..n).filter(|v| !inlet_vertices.contains(v)).collect();
@@ -138,7 +136,7 @@ impl RingPlan {
         let mut at: Vec<Attach> = free.iter().map(|&v| Attach::Vertex(v)).collect();
         at.extend(choose(rng, slots.len(), extra).into_iter().map(|i| slots[i]));
         let outlets = at.into_iter().map(|a| Self::draw_outlet(rng, a)).collect();
-        RingPlan { shape: Shape::Ring, vertices, radii, middles, up, inlets, outlets }
+        RingPlan { shape: Shape::Ring, vertices, radii, middles, inlets, outlets }
     }
 
     /// An inlet: 1 to 1.3 of its vertex's radius at the ring, widening by a taper of 0-30 %
@@ -408,7 +406,7 @@ pub fn willis_plan(rng: &mut SeededRng) -> RingPlan {
         branch(5, 1.0, 90.0, 10.0, "left middle cerebral artery"),
         branch(6, 1.1, 110.0, 55.0, "left anterior cerebral artery"),
     ];
-    RingPlan { shape: Shape::CircleOfWillis, vertices, radii, middles, up: Vector3::z(), inlets, outlets }
+    RingPlan { shape: Shape::CircleOfWillis, vertices, radii, middles, inlets, outlets }
 }
 
 /// A graft's draws: the host's radius and taper, the graft's radius ratio, its two angles to the

@@ -6,7 +6,10 @@ use crate::synthetic_tree::model::{Contact, Piece};
 use crate::synthetic_tree::truth::Node;
 use std::collections::{HashMap, VecDeque};
 
-fn node_key(n: Node) -> (u8, usize) {
+/// A node as a hashable key: (0, end) or (1, junction).
+type NodeKey = (u8, usize);
+
+fn node_key(n: Node) -> NodeKey {
     match n {
         Node::End(i) => (0, i),
         Node::Junction(i) => (1, i),
@@ -17,7 +20,7 @@ fn node_key(n: Node) -> (u8, usize) {
 /// each segment off it the cycle it closes (the segment, then the tree paths from its two nodes
 /// to where they meet), as segment indices. Its size is E - V + 1 for a connected graph.
 pub fn independent_loops(segments: &[GraphSegment]) -> Vec<Vec<usize>> {
-    let mut adjacent: HashMap<(u8, usize), Vec<(usize, (u8, usize))>> = HashMap::new();
+    let mut adjacent: HashMap<NodeKey, Vec<(usize, NodeKey)>> = HashMap::new();
     for (i, s) in segments.iter().enumerate() {
         let (a, b) = (node_key(s.from), node_key(s.to));
         adjacent.entry(a).or_default().push((i, b));
@@ -25,19 +28,19 @@ pub fn independent_loops(segments: &[GraphSegment]) -> Vec<Vec<usize>> {
     }
     let Some(root) = segments.first().map(|s| node_key(s.from)) else { return Vec::new() };
     // Per node reached: the segment to its parent and the parent.
-    let mut parent: HashMap<(u8, usize), Option<(usize, (u8, usize))>> = HashMap::from([(root, None)]);
+    let mut parent: HashMap<NodeKey, Option<(usize, NodeKey)>> = HashMap::from([(root, None)]);
     let mut in_tree = vec![false; segments.len()];
     let mut queue = VecDeque::from([root]);
     while let Some(n) = queue.pop_front() {
         for &(seg, m) in &adjacent[&n] {
-            if !parent.contains_key(&m) {
-                parent.insert(m, Some((seg, n)));
+            if let std::collections::hash_map::Entry::Vacant(e) = parent.entry(m) {
+                e.insert(Some((seg, n)));
                 in_tree[seg] = true;
                 queue.push_back(m);
             }
         }
     }
-    let path_up = |mut n: (u8, usize)| {
+    let path_up = |mut n: NodeKey| {
         let mut out = Vec::new();
         while let Some(Some((seg, up))) = parent.get(&n) {
             out.push((*seg, *up));
@@ -75,10 +78,13 @@ impl Network {
     }
 
     /// The gap the walls need at a contact: two cells, plus a third of the width of any blend
-    /// zone of either tube acting there (the cubic blend fuses walls closer than that).
+    /// zone of either tube acting between the walls there (the cubic blend fuses walls closer
+    /// than that).
     fn needed_gap(&self, a: usize, b: usize, c: &Contact) -> f64 {
+        let towards = (c.p - c.q).try_normalize(1e-300).unwrap_or_else(nalgebra::Vector3::zeros);
+        let between = nalgebra::center(&c.wall_point(), &(c.q + towards * c.rq));
         let zones = self.tubes[a].zones.iter().chain(&self.tubes[b].zones);
-        let acting = zones.filter(|z| z.distance(&c.wall_point()) < z.outer || z.distance(&c.q) < z.outer + c.rq);
+        let acting = zones.filter(|z| z.distance(&between) < z.outer);
         self.gap_min + acting.map(|z| z.k / 3.0).fold(0.0, f64::max)
     }
 

@@ -8,13 +8,13 @@ use indexmap::IndexMap;
 use serde_json::{json, Value};
 
 impl RandomNetwork {
-    /// The manifest, naming the surface and centerline files.
-    pub fn manifest(&self, surface_file: &str, centerlines_file: &str) -> Value {
+    /// The manifest, naming the surface and centerline files (its keys in this order).
+    pub fn manifest(&self, surface_file: &str, centerlines_file: &str) -> IndexMap<&'static str, Value> {
         let net = &self.network;
         let s = &self.surface;
         let open = net.ends.iter().filter(|e| !e.capped).count() as i64;
         let genus = self.loops.len() as i64;
-        let mut m: IndexMap<&str, Value> = IndexMap::new();
+        let mut m: IndexMap<&'static str, Value> = IndexMap::new();
         m.insert("format", json!("vesselhex random network"));
         m.insert("generator_version", json!(GENERATOR_VERSION));
         m.insert("seed", json!(self.seed));
@@ -55,7 +55,7 @@ impl RandomNetwork {
         m.insert("junctions", self.junctions_json());
         m.insert("segments", self.segments_json());
         m.insert("vessels", self.vessels_json());
-        json!(m)
+        m
     }
 
     /// The segment that ends at free end `e`.

@@ -83,7 +83,6 @@ use crate::synthetic_tree::{write_surface_vtp, SurfaceFormat, MAX_ATTEMPTS};
 use draw::{draw_end_style, lay_graft, lay_ring, willis_plan, GraftPlan, RingPlan, Shape};
 use indexmap::IndexMap;
 use model::{GraphSegment, Network};
-use serde_json::Value;
 use std::path::{Path, PathBuf};
 
 /// Version of the network generator: a network is the same network for a seed within a version.
@@ -265,8 +264,7 @@ pub fn write_random_network(
     let centerlines = network.centerlines()?;
     let [surface, manifest, centerline_path] = random_network_paths(&network.name, dir, format);
     let file_name = |p: &Path| p.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned());
-    let value: Value = network.manifest(&file_name(&surface), &file_name(&centerline_path));
-    let text = serde_json::to_string_pretty(&value)
+    let text = serde_json::to_string_pretty(&network.manifest(&file_name(&surface), &file_name(&centerline_path)))
         .map_err(|e| Error::Geometry(format!("{}: the manifest cannot be written: {e}", network.name)))?;
     progress.stage(&format!("{}: writing", network.name));
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, "creating the output folder", e))?;
