@@ -5,7 +5,6 @@ use super::model::{Network, Tube};
 use super::shapes::{branch_direction, ring, BranchSpec};
 use crate::synthetic_tree::centerline::{direction_from, sample_at, PathBuilder, MIN_CURVATURE_RADII};
 use crate::synthetic_tree::layout::{taper_profile, tortuous_body};
-use crate::synthetic_tree::model::Zone;
 use crate::synthetic_tree::rng::SeededRng;
 use crate::synthetic_tree::separation::junction_reach;
 use nalgebra::{Point3, Vector3};
@@ -516,17 +515,11 @@ fn lay_graft_vessel(
     b.straight(stretch[1]);
     let samples = b.finish(|_| r);
     let k = net.blend_width(r);
-    let inner = r + k + net.gap_min;
-    let zone = |a: Point3<f64>, tip: Point3<f64>| Zone {
-        a,
-        b: tip,
-        inner,
-        outer: inner + r.max(2.0 * net.h),
-        k,
-        partners: Vec::new(),
-    };
     let length = samples.last().map_or(0.0, |q| q.s);
-    let zones = vec![zone(host[0].p, host[0].p + out * stretch[0]), zone(host[1].p, host[1].p - arrive * stretch[1])];
+    let zones = vec![
+        net.junction_zone(host[0].p, host[0].p + out * stretch[0], r),
+        net.junction_zone(host[1].p, host[1].p - arrive * stretch[1], r),
+    ];
     let mut draws = Map::new();
     draws.insert("radius_mm".into(), json!(r));
     net.tubes.push(Tube {

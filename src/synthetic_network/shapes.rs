@@ -110,7 +110,54 @@ impl Network {
     ) -> Option<usize> {
         let r = spec.radius;
         let stretch = self.junction_stretch(junction, host, &spec.direction, r)?;
+        let (samples, side_anchor) = self.branch_path(rng, host, &spec, stretch);
         let k = self.blend_width(r);
+        let zone = self.junction_zone(host.p, host.p + spec.direction * stretch, r);
+        let reach = junction_reach(host.r, r, k, self.gap_min, spec.direction.angle(&host.t)).max(stretch);
+        let id = self.tubes.len();
+        let at = if spec.inlet { samples.last().map_or(0.0, |q| q.s) } else { 0.0 };
+        self.junctions[junction].on.push((id, at, reach));
+        let mut draws = Map::new();
+        draws.insert("radius_at_junction_mm".into(), json!(r));
+        draws.insert("taper".into(), json!(spec.taper));
+        draws.insert("tortuosity".into(), json!(spec.tortuosity));
+        draws.insert("body_radii".into(), json!(spec.body_radii));
+        draws.insert("angle_to_host_deg".into(), json!(spec.direction.angle(&host.t).to_degrees()));
+        if !spec.label.is_empty() {
+            draws.insert("label".into(), json!(spec.label));
+        }
+        let (start_end, end_end) = (None, None);
+        let zones = vec![zone];
+        self.tubes.push(Tube {
+            name: spec.name,
+            samples,
+            closed: false,
+            start_end,
+            end_end,
+            zones,
+            side_anchor,
+            draws,
+        });
+        if spec.inlet {
+            self.tubes[id].start_end = Some(self.add_end(rng, id, true, true, spec.label));
+        } else if spec.free_end {
+            self.tubes[id].end_end = Some(self.add_end(rng, id, false, false, spec.label));
+        }
+        Some(id)
+    }
+
+    /// A branch's centerline from its host's sample: straight for `stretch`, its body (halved
+    /// round a straight stretch of four radii when it is to take a side branch), two straight
+    /// radii; its radius tapering away from the junction (an outlet) or widening (an inlet,
+    /// whose samples are then reversed). With the arc length of the side branch's anchor.
+    fn branch_path(
+        &self,
+        rng: &mut SeededRng,
+        host: &Sample,
+        spec: &BranchSpec,
+        stretch: f64,
+    ) -> (Vec<Sample>, Option<f64>) {
+        let r = spec.radius;
         let normal = rng.perpendicular(&spec.direction, &host.t);
         let mut b = PathBuilder::new(host.p, spec.direction, normal, r, r);
         b.straight(stretch);
@@ -129,58 +176,23 @@ impl Network {
         b.straight(2.0 * r);
         let floor = self.h * CELLS_PER_SMALLEST_RADIUS;
         let (taper, length) = (spec.taper, b.length());
-        let mut samples = if spec.inlet {
-            // Widening away from the junction: the profile read from the free end.
-            let r_free = r / (1.0 - taper);
-            b.finish(|s| taper_profile(length - s, length - body_end, length - body_start, r_free, taper, floor))
-        } else {
-            b.finish(|s| taper_profile(s, body_start, body_end, r, taper, floor))
-        };
+        if !spec.inlet {
+            return (b.finish(|s| taper_profile(s, body_start, body_end, r, taper, floor)), side_anchor);
+        }
+        // Widening away from the junction: the profile read from the free end.
+        let r_free = r / (1.0 - taper);
+        let samples =
+            b.finish(|s| taper_profile(length - s, length - body_end, length - body_start, r_free, taper, floor));
+        (reversed(&samples), side_anchor.map(|s| length - s))
+    }
+
+    /// The blend zone of a branch of radius `r` at a junction: round the segment from the
+    /// junction's point `a` on its host's axis to `b`, where its straight stretch out of the
+    /// junction ends, as a tree's daughter's.
+    pub fn junction_zone(&self, a: Point3<f64>, b: Point3<f64>, r: f64) -> Zone {
+        let k = self.blend_width(r);
         let inner = r + k + self.gap_min;
-        let zone = Zone {
-            a: host.p,
-            b: host.p + spec.direction * stretch,
-            inner,
-            outer: inner + r.max(2.0 * self.h),
-            k,
-            partners: Vec::new(),
-        };
-        let reach = junction_reach(host.r, r, k, self.gap_min, spec.direction.angle(&host.t)).max(stretch);
-        let id = self.tubes.len();
-        if spec.inlet {
-            samples = reversed(&samples);
-            side_anchor = side_anchor.map(|s| length - s);
-        }
-        let at = if spec.inlet { length } else { 0.0 };
-        self.junctions[junction].on.push((id, at, reach));
-        let mut draws = Map::new();
-        draws.insert("radius_at_junction_mm".into(), json!(r));
-        draws.insert("taper".into(), json!(taper));
-        draws.insert("tortuosity".into(), json!(spec.tortuosity));
-        draws.insert("body_radii".into(), json!(spec.body_radii));
-        draws.insert("angle_to_host_deg".into(), json!(spec.direction.angle(&host.t).to_degrees()));
-        if !spec.label.is_empty() {
-            draws.insert("label".into(), json!(spec.label));
-        }
-        self.tubes.push(Tube {
-            name: spec.name,
-            samples,
-            closed: false,
-            start_end: None,
-            end_end: None,
-            zones: vec![zone],
-            side_anchor,
-            draws,
-        });
-        if spec.inlet || spec.free_end {
-            let end = self.add_end(rng, id, spec.inlet, spec.inlet, spec.label);
-            if spec.inlet {
-                self.tubes[id].start_end = Some(end);
-            } else {
-                self.tubes[id].end_end = Some(end);
-            }
-        }
-        Some(id)
+        Zone { a, b, inner, outer: inner + r.max(2.0 * self.h), k, partners: Vec::new() }
     }
 
     /// A junction at the sample `at` of tube `host` (its reach there grows with its branches').
