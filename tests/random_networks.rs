@@ -15,7 +15,7 @@ use common::{path_str, temp_dir, vesselhex};
 use serde_json::Value;
 use std::collections::{HashMap, HashSet};
 use std::process::Command;
-use vesselhex::input::read_centerlines;
+use vesselhex::input::{read_centerlines, CenterlinePolyline};
 use vesselhex::progress::Progress;
 use vesselhex::synthetic_network::draw::Shape;
 use vesselhex::synthetic_network::{write_random_network, RandomNetwork};
@@ -78,6 +78,41 @@ fn graph_matches_loops(what: &str, manifest: &Value) -> usize {
     loops.len()
 }
 
+/// Smallest wall gap between two centerline polylines with radii: each point of one against
+/// each edge of the other (radius interpolated along the edge).
+fn wall_gap(a: &CenterlinePolyline, b: &CenterlinePolyline) -> f64 {
+    let (ra, rb) = (a.radii.as_ref().unwrap(), b.radii.as_ref().unwrap());
+    let mut gap = f64::INFINITY;
+    for (p, r) in a.points.iter().zip(ra) {
+        for k in 0..b.points.len() - 1 {
+            let (q0, q1) = (b.points[k], b.points[k + 1]);
+            let e = q1 - q0;
+            let t = ((p - q0).dot(&e) / e.norm_squared().max(1e-300)).clamp(0.0, 1.0);
+            let rq = rb[k] + (rb[k + 1] - rb[k]) * t;
+            gap = gap.min((p - (q0 + e * t)).norm() - r - rq);
+        }
+    }
+    gap
+}
+
+/// The walls of two segments that share no node (junction or end) keep at least two grid cells
+/// apart: measured on the centerlines, whose radii are distances to the surface.
+fn walls_apart_unless_joined(what: &str, net: &RandomNetwork, manifest: &Value, h: f64) {
+    let lines = net.centerlines().unwrap().polylines;
+    let segments = manifest["segments"].as_array().unwrap();
+    let nodes = |s: &Value| [node(&s["from"]), node(&s["to"])];
+    for a in 0..segments.len() {
+        for b in a + 1..segments.len() {
+            let (na, nb) = (nodes(&segments[a]), nodes(&segments[b]));
+            if na.iter().any(|n| nb.contains(n)) {
+                continue;
+            }
+            let gap = wall_gap(&lines[a], &lines[b]);
+            assert!(gap >= 2.0 * h * (1.0 - 1e-6), "{what}: segments {a} and {b}: walls {gap} mm apart, cell {h} mm");
+        }
+    }
+}
+
 #[test]
 fn each_network_is_one_outward_manifold_whose_genus_is_its_loop_count_with_its_ends_where_the_truth_says() {
     let sample = SEEDS.iter().map(|&s| (s, None)).chain([(0, Some(Shape::CircleOfWillis))]);
@@ -102,6 +137,7 @@ fn each_network_is_one_outward_manifold_whose_genus_is_its_loop_count_with_its_e
         assert!(closed_volume6(&s.vertices, &s.triangles, &loops) > 0.0, "{what}: triangles face inwards");
         let h = manifest["grid"]["cell_size_mm"].as_f64().unwrap();
         ends_where_the_truth_says(&what, &s.vertices, &s.triangles, &loops, ends, h);
+        walls_apart_unless_joined(&what, &net, &manifest, h);
         let inlets = ends.iter().filter(|e| e["role"] == "inlet").count();
         let outlets = ends.len() - inlets;
         match manifest["shape"].as_str().unwrap() {
