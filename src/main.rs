@@ -61,8 +61,8 @@ struct FixturesArgs {
     #[arg(long, value_name = "SEED", value_parser = parse_seeds)]
     random_network: Option<(u64, u64)>,
     /// Write the circle of Willis (both carotids and the basilar feeding a ring of seven
-    /// segments, six cerebral arteries leaving it): circle_of_willis.stl (or .vtp), .json and
-    /// _centerlines.vtp.
+    /// segments, six cerebral arteries leaving it), drawn from seed 0: circle_of_willis.stl (or
+    /// .vtp), .json and _centerlines.vtp.
     #[arg(long)]
     circle_of_willis: bool,
     /// Format of a random tree's or network's surface: stl (binary, f32) or vtp (f64) [default: stl].
