@@ -25,6 +25,7 @@ pub mod pipeline;
 pub mod stages;
 pub mod synthetic;
 pub mod synthetic_branching;
+pub mod synthetic_network;
 pub mod synthetic_tree;
 pub mod testing;
 pub mod writers;

@@ -30,7 +30,8 @@ enum Command {
     Centerlines(CenterlinesArgs),
     /// Write the synthetic test vessels into a folder: the unbranched ones (STL + CSV centerline)
     /// and the branching ones (STL + VTP centerlines); with --random-tree, random vessel trees
-    /// with their truth instead.
+    /// with their truth instead, with --random-network random networks with loops and several
+    /// inlets, with --circle-of-willis the circle of Willis.
     Fixtures(FixturesArgs),
     /// Mesh every case of a manifest (CSV or JSON), N at a time, each in a process of its own,
     /// with a summary table (summary.csv, summary.json).
@@ -42,6 +43,7 @@ enum Command {
 }
 
 #[derive(Args)]
+#[command(group(clap::ArgGroup::new("generated").args(["random_tree", "random_network", "circle_of_willis"])))]
 struct FixturesArgs {
     /// Folder to write into (created if needed).
     #[arg(long)]
@@ -52,8 +54,20 @@ struct FixturesArgs {
     /// its centerlines tree_SEED_centerlines.vtp. The same seed gives the same bytes.
     #[arg(long, value_name = "SEED", value_parser = parse_seeds)]
     random_tree: Option<(u64, u64)>,
-    /// Format of a random tree's surface: stl (binary, f32) or vtp (f64) [default: stl].
-    #[arg(long, value_parser = ["stl", "vtp"], requires = "random_tree")]
+    /// Write the random network (a ring fed by 2-3 inlets, a graft on its host, or a circle of
+    /// Willis) of this seed, or of every seed of a range FIRST-LAST: network_SEED.stl (or .vtp),
+    /// its manifest network_SEED.json (ends with their inlet or outlet role, junctions,
+    /// segments, loops, every draw) and its centerlines network_SEED_centerlines.vtp (one
+    /// polyline per segment). The same seed gives the same bytes.
+    #[arg(long, value_name = "SEED", value_parser = parse_seeds)]
+    random_network: Option<(u64, u64)>,
+    /// Write the circle of Willis (both carotids and the basilar feeding a ring of seven
+    /// segments, six cerebral arteries leaving it), drawn from seed 0: circle_of_willis.stl (or
+    /// .vtp), .json and _centerlines.vtp.
+    #[arg(long)]
+    circle_of_willis: bool,
+    /// Format of a random tree's or network's surface: stl (binary, f32) or vtp (f64) [default: stl].
+    #[arg(long, value_parser = ["stl", "vtp"], requires = "generated")]
     format: Option<String>,
     /// No progress display and no summary.
     #[arg(long)]
@@ -77,15 +91,18 @@ fn parse_seeds(text: &str) -> Result<(u64, u64), String> {
     }
 }
 
-/// `vesselhex fixtures`: the bundled fixtures, or random trees.
+/// `vesselhex fixtures`: the bundled fixtures, random trees, or random networks.
 fn fixtures(args: FixturesArgs) -> vesselhex::Result<()> {
     use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
+    let format = if args.format.as_deref() == Some("vtp") { SurfaceFormat::Vtp } else { SurfaceFormat::Stl };
+    if args.random_network.is_some() || args.circle_of_willis {
+        return network_fixtures(&args, format);
+    }
     let Some((first, last)) = args.random_tree else {
         vesselhex::synthetic::write_all_fixtures(&args.output)?;
         vesselhex::synthetic_branching::write_all_branching_fixtures(&args.output)?;
         return Ok(());
     };
-    let format = if args.format.as_deref() == Some("vtp") { SurfaceFormat::Vtp } else { SurfaceFormat::Stl };
     let mut progress = vesselhex::progress::Progress::new(args.quiet, 4 * (last - first + 1));
     for seed in first..=last {
         let written = write_random_tree(seed, &args.output, format, &mut progress)?;
@@ -105,6 +122,41 @@ fn fixtures(args: FixturesArgs) -> vesselhex::Result<()> {
                     "vesselhex: random tree {seed}: {} ends, {} triangles{redrawn}; written to {}, {}, {}",
                     t.ends.len(),
                     t.surface.triangles.len(),
+                    written.surface.display(),
+                    written.manifest.display(),
+                    written.centerlines.display()
+                );
+            });
+        }
+    }
+    progress.finish();
+    Ok(())
+}
+
+/// `vesselhex fixtures --random-network` or `--circle-of-willis`.
+fn network_fixtures(args: &FixturesArgs, format: vesselhex::synthetic_tree::SurfaceFormat) -> vesselhex::Result<()> {
+    use vesselhex::synthetic_network::{draw::Shape, write_random_network};
+    // The circle of Willis is drawn from seed 0's streams.
+    let (first, last, forced) = match args.random_network {
+        Some((first, last)) => (first, last, None),
+        None => (0, 0, Some(Shape::CircleOfWillis)),
+    };
+    let mut progress = vesselhex::progress::Progress::new(args.quiet, 4 * (last - first + 1));
+    for seed in first..=last {
+        let written = write_random_network(seed, forced, &args.output, format, &mut progress)?;
+        if !args.quiet {
+            progress.suspend(|| {
+                let n = &written.network;
+                let inlets = n.network.ends.iter().filter(|e| e.inlet).count();
+                eprintln!(
+                    "vesselhex: {} ({}): {} inlets, {} outlets, {} loops, {} triangles, drawn {} times; written to {}, {}, {}",
+                    n.name,
+                    n.network.shape,
+                    inlets,
+                    n.network.ends.len() - inlets,
+                    n.loops.len(),
+                    n.surface.triangles.len(),
+                    n.attempt + 1,
                     written.surface.display(),
                     written.manifest.display(),
                     written.centerlines.display()

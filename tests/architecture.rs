@@ -25,7 +25,15 @@ const LAYERS: &[&[&str]] = &[
     &["stages"],
     &["writers"],
     &["pipeline"],
-    &["implicit_surface", "synthetic", "synthetic_branching", "synthetic_tree", "testing", "batch"],
+    &[
+        "implicit_surface",
+        "synthetic",
+        "synthetic_branching",
+        "synthetic_tree",
+        "synthetic_network",
+        "testing",
+        "batch",
+    ],
 ];
 
 /// The stages under `src/stages/`, in the order data flows through them: a stage may import

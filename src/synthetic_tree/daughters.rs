@@ -4,7 +4,7 @@
 //! walls apart.
 
 use super::centerline::{sample_at, PathBuilder, Sample};
-use super::layout::{taper_profile, Hairpin, Layout, PlaceSpec, SteeredPass};
+use super::layout::{taper_profile, tortuous_body, Hairpin, Layout, PlaceSpec, SteeredPass};
 use super::model::{vessel_pieces, Finish, Piece, Vessel, Zone};
 use super::rng::SeededRng;
 use super::separation::junction_reach;
@@ -70,7 +70,7 @@ impl Layout {
                 steered = self.steer_body(rng, &mut b, radius, &partners);
             }
             if steered.is_none() {
-                bend = self.tortuous_body(rng, &mut b, radius, length, tortuosity, spec.hairpins[i]);
+                bend = tortuous_body(rng, &mut b, radius, length, tortuosity, spec.hairpins[i]);
             }
             let body_end = b.length();
             b.straight(2.0 * radius);

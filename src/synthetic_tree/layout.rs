@@ -236,7 +236,7 @@ impl Layout {
         let taper = rng.range(0.0, 0.3);
         let hairpin = rng.chance(0.2);
         let body_start = b.length();
-        let bend = self.tortuous_body(rng, &mut b, radius, body_length, tortuosity, hairpin);
+        let bend = tortuous_body(rng, &mut b, radius, body_length, tortuosity, hairpin);
         let body_end = b.length();
         b.straight(2.0 * radius);
         let floor = self.floor();
@@ -275,46 +275,6 @@ impl Layout {
         self.vessels.push(vessel);
         self.end_capped.push(capped);
         id
-    }
-
-    /// Tortuous pieces of `length` (arcs of 1.5 to 4 radii turning up to `tortuosity` × 75°,
-    /// towards a random side, no tighter than 1.5 radii), with a hairpin somewhere along when
-    /// `hairpin` (60° to 130° within 1.2 θ to 3 radii, straight radius-long stretches either
-    /// side). Returns the hairpin laid.
-    pub fn tortuous_body(
-        &self,
-        rng: &mut SeededRng,
-        b: &mut PathBuilder,
-        radius: f64,
-        length: f64,
-        tortuosity: f64,
-        hairpin: bool,
-    ) -> Option<Hairpin> {
-        let start = b.length();
-        let mut bend_at = if hairpin { Some(start + rng.range(0.1, 0.6) * length) } else { None };
-        let mut laid = None;
-        while b.length() < start + length {
-            if bend_at.is_some_and(|at| b.length() >= at) {
-                bend_at = None;
-                let angle = rng.range(60.0f64, 130.0).to_radians();
-                let arc = rng.range((super::centerline::HAIRPIN_MIN_CURVATURE_RADII * angle).max(1.5), 3.0) * radius;
-                b.straight(radius);
-                let s = b.length();
-                let last = *b.last();
-                let side = rng.perpendicular(&last.t, &last.n);
-                b.arc(arc, angle, &side);
-                laid = Some(Hairpin { vessel: 0, s, length: arc, angle, radius: arc / angle });
-                b.straight(radius);
-                continue;
-            }
-            let piece = rng.range(1.5, 4.0) * radius;
-            let max_turn = piece / (super::centerline::MIN_CURVATURE_RADII * radius);
-            let turn = (rng.range(0.0, 75.0 * tortuosity).to_radians()).min(max_turn);
-            let last = *b.last();
-            let side = rng.perpendicular(&last.t, &last.n);
-            b.arc(piece, turn, &side);
-        }
-        laid
     }
 
     /// Adds places until the tree has its ends, the area budget is spent, or 30 drawn places in
@@ -476,6 +436,45 @@ impl Layout {
         let front = self.extension + q.r + 2.0 * self.h;
         Piece { comp, a: q.p - n * back, b: q.p + n * front, ra: q.r, rb: q.r, sa: q.s, sb: q.s }
     }
+}
+
+/// Tortuous pieces of `length` (arcs of 1.5 to 4 radii turning up to `tortuosity` × 75°,
+/// towards a random side, no tighter than 1.5 radii), with a hairpin somewhere along when
+/// `hairpin` (60° to 130° within 1.2 θ to 3 radii, straight radius-long stretches either
+/// side). Returns the hairpin laid.
+pub fn tortuous_body(
+    rng: &mut SeededRng,
+    b: &mut PathBuilder,
+    radius: f64,
+    length: f64,
+    tortuosity: f64,
+    hairpin: bool,
+) -> Option<Hairpin> {
+    let start = b.length();
+    let mut bend_at = if hairpin { Some(start + rng.range(0.1, 0.6) * length) } else { None };
+    let mut laid = None;
+    while b.length() < start + length {
+        if bend_at.is_some_and(|at| b.length() >= at) {
+            bend_at = None;
+            let angle = rng.range(60.0f64, 130.0).to_radians();
+            let arc = rng.range((super::centerline::HAIRPIN_MIN_CURVATURE_RADII * angle).max(1.5), 3.0) * radius;
+            b.straight(radius);
+            let s = b.length();
+            let last = *b.last();
+            let side = rng.perpendicular(&last.t, &last.n);
+            b.arc(arc, angle, &side);
+            laid = Some(Hairpin { vessel: 0, s, length: arc, angle, radius: arc / angle });
+            b.straight(radius);
+            continue;
+        }
+        let piece = rng.range(1.5, 4.0) * radius;
+        let max_turn = piece / (super::centerline::MIN_CURVATURE_RADII * radius);
+        let turn = (rng.range(0.0, 75.0 * tortuosity).to_radians()).min(max_turn);
+        let last = *b.last();
+        let side = rng.perpendicular(&last.t, &last.n);
+        b.arc(piece, turn, &side);
+    }
+    laid
 }
 
 /// Radius along a vessel: `radius` to `body_start`, then linearly down by `taper` to

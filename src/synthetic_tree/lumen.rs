@@ -14,7 +14,9 @@
 //! component's blend width inside its zone (around its junction's contact, or its sac's neck)
 //! and falls smoothly to 0 outside: a daughter is filleted into its host and siblings at the
 //! junction only, and walls that merely pass each other (at least two cells apart, checked when
-//! the tree is laid) meet as a plain minimum, so they never fuse.
+//! the tree is laid) meet as a plain minimum, so they never fuse. A component may have several
+//! zones (a network's graft joins its host at both ends, [`crate::synthetic_network`]): the
+//! widest at a point acts there.
 //!
 //! Evaluation is local: segments are bucketed in the grid's bricks, each brick holding the
 //! segments that come within `band` of it (four cells plus 2.2 blend widths past their radius);
@@ -25,7 +27,7 @@
 use super::layout::Layout;
 use super::model::{Finish, Zone};
 use crate::implicit_surface::{
-    cap_ends, check_surface, clip_open_end, compact, smooth_min_varying, triangulate, BrickValues, EndCircle,
+    cap_ends, check_surface_of_genus, clip_open_end, compact, smooth_min_varying, triangulate, BrickValues, EndCircle,
     ImplicitFunction, SampledGrid, SurfaceDefect, SurfaceStats, TriangulatedSurface, BRICK,
 };
 use nalgebra::{Point3, Vector3};
@@ -81,7 +83,8 @@ pub struct TreeLumen {
     /// Per segment: how far past its radius it is evaluated (four cells plus 2.2 times the
     /// largest blend width of the zones that can act near it).
     bands: Vec<f64>,
-    zones: Vec<Option<Zone>>,
+    /// Per component, its blend zones (the widest at a point acts there).
+    zones: Vec<Vec<Zone>>,
     origin: Point3<f64>,
     h: f64,
     cells: [usize; 3],
@@ -90,29 +93,51 @@ pub struct TreeLumen {
     buckets: HashMap<[usize; 3], Vec<u32>>,
 }
 
+/// One component of a lumen before it is folded in: the tapered capsules `(a, b, r_a, r_b)` of
+/// its axis (a ball when `a == b`) and the zones where it blends with the components before it
+/// (none for a component that only meets the others as a plain minimum).
+#[derive(Debug, Clone)]
+pub struct LumenPart {
+    pub capsules: Vec<(Point3<f64>, Point3<f64>, f64, f64)>,
+    pub zones: Vec<Zone>,
+}
+
 impl TreeLumen {
+    /// The lumen of a tree: each vessel (the root's inlet and every free end extended past
+    /// their planes), then each sac.
     pub fn new(layout: &Layout) -> Self {
-        let h = layout.h;
         let ext = layout.extension;
-        let mut segments = Vec::new();
-        let mut zones = Vec::new();
+        let mut parts = Vec::new();
         for (id, v) in layout.vessels.iter().enumerate() {
+            let mut capsules = Vec::new();
             if id == 0 {
                 let q = v.first();
-                segments.push(Segment::new(id, q.p - q.t * ext, q.p, q.r, q.r));
+                capsules.push((q.p - q.t * ext, q.p, q.r, q.r));
             }
-            for w in v.samples.windows(2) {
-                segments.push(Segment::new(id, w[0].p, w[1].p, w[0].r, w[1].r));
-            }
+            capsules.extend(v.samples.windows(2).map(|w| (w[0].p, w[1].p, w[0].r, w[1].r)));
             if v.finish == Finish::Free {
                 let q = v.last();
-                segments.push(Segment::new(id, q.p, q.p + q.t * ext, q.r, q.r));
+                capsules.push((q.p, q.p + q.t * ext, q.r, q.r));
             }
-            zones.push(v.zone.clone());
+            parts.push(LumenPart { capsules, zones: v.zone.iter().cloned().collect() });
         }
-        for (i, sac) in layout.sacs.iter().enumerate() {
-            segments.push(Segment::new(layout.vessels.len() + i, sac.centre, sac.centre, sac.radius, sac.radius));
-            zones.push(Some(sac.zone.clone()));
+        for sac in &layout.sacs {
+            parts.push(LumenPart {
+                capsules: vec![(sac.centre, sac.centre, sac.radius, sac.radius)],
+                zones: vec![sac.zone.clone()],
+            });
+        }
+        TreeLumen::from_parts(layout.h, parts)
+    }
+
+    /// The lumen of `parts` folded in their order (see the module documentation) on a grid of
+    /// cell `h`.
+    pub fn from_parts(h: f64, parts: Vec<LumenPart>) -> Self {
+        let mut segments = Vec::new();
+        let mut zones = Vec::new();
+        for (id, part) in parts.into_iter().enumerate() {
+            segments.extend(part.capsules.iter().map(|&(a, b, ra, rb)| Segment::new(id, a, b, ra, rb)));
+            zones.push(part.zones);
         }
         let largest_blend = zones.iter().flatten().map(|z| z.k).fold(0.0, f64::max);
         let widest = 4.0 * h + 2.2 * largest_blend;
@@ -187,11 +212,8 @@ impl TreeLumen {
             let f = self.segments[nearest as usize].value_gradient(p);
             acc = Some(match acc {
                 None => f,
-                Some(a) => match &self.zones[comp as usize] {
-                    Some(z) => {
-                        let (k, grad_k) = z.width(p);
-                        smooth_min_varying(a, f, k, &grad_k)
-                    }
+                Some(a) => match blend_width(&self.zones[comp as usize], p) {
+                    Some((k, grad_k)) => smooth_min_varying(a, f, k, &grad_k),
                     None if f.0 < a.0 => f,
                     None => a,
                 },
@@ -211,10 +233,9 @@ impl TreeLumen {
                 f = f.min(self.segments[candidates[i] as usize].value(p));
                 i += 1;
             }
-            acc = Some(match (acc, &self.zones[comp as usize]) {
+            acc = Some(match (acc, blend_width(&self.zones[comp as usize], p)) {
                 (None, _) => f,
-                (Some(a), Some(z)) => {
-                    let k = z.width(p).0;
+                (Some(a), Some((k, _))) => {
                     let h = if k > 0.0 { (k - (a - f).abs()).max(0.0) / k } else { 0.0 };
                     a.min(f) - k * h * h * h / 6.0
                 }
@@ -232,7 +253,7 @@ impl TreeLumen {
         for &c in candidates {
             let s = &self.segments[c as usize];
             nearest = nearest.min(s.value(p));
-            if let Some(z) = &self.zones[s.comp as usize] {
+            for z in &self.zones[s.comp as usize] {
                 blend = blend.max(z.k);
             }
         }
@@ -290,9 +311,18 @@ impl ImplicitFunction for TreeLumen {
     }
 }
 
-/// Triangulates the tree's lumen, cuts its ends, caps the capped ones, and checks the result
-/// against `ends`.
-pub fn mesh_tree(f: &TreeLumen, ends: &[EndCircle]) -> Result<TriangulatedSurface, SurfaceDefect> {
+/// The blend width of a component's zones at `p` and its gradient: the widest zone's there
+/// (`None` for a component without zones).
+fn blend_width(zones: &[Zone], p: &Point3<f64>) -> Option<(f64, Vector3<f64>)> {
+    let mut widths = zones.iter().map(|z| z.width(p));
+    let first = widths.next()?;
+    Some(widths.fold(first, |a, b| if b.0 > a.0 { b } else { a }))
+}
+
+/// Triangulates a lumen, cuts its ends, caps the capped ones, and checks the result against
+/// `ends` and the genus it must have (0 for a tree, its number of independent loops for a
+/// network).
+pub fn mesh_lumen(f: &TreeLumen, ends: &[EndCircle], genus: i64) -> Result<TriangulatedSurface, SurfaceDefect> {
     let mut grid = f.sample_grid();
     let (mut vertices, mut triangles, flipped) = triangulate(f, &mut grid)?;
     let mut stats = SurfaceStats { grid: grid.cells, flipped, ..SurfaceStats::default() };
@@ -302,6 +332,6 @@ pub fn mesh_tree(f: &TreeLumen, ends: &[EndCircle]) -> Result<TriangulatedSurfac
     cap_ends(ends, &mut vertices, &mut triangles)?;
     let (vertices, triangles) = compact(vertices, triangles);
     let mut surface = TriangulatedSurface { vertices, triangles, stats };
-    check_surface(f, &mut surface, ends)?;
+    check_surface_of_genus(f, &mut surface, ends, genus)?;
     Ok(surface)
 }

@@ -74,7 +74,7 @@ use crate::progress::Progress;
 use features::NearPass;
 use indexmap::IndexMap;
 use layout::{Layout, TreeDraws};
-use lumen::{mesh_tree, TreeLumen};
+use lumen::{mesh_lumen, TreeLumen};
 use rng::SeededRng;
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -120,7 +120,7 @@ impl RandomTree {
             progress.stage(&format!("tree {seed}: surface"));
             let lumen = TreeLumen::new(&layout);
             let circles: Vec<EndCircle> = ends.iter().map(|(_, c)| *c).collect();
-            match mesh_tree(&lumen, &circles) {
+            match mesh_lumen(&lumen, &circles, 0) {
                 Ok(surface) => {
                     return Ok(RandomTree { seed, attempt, redrawn, layout, ends, surface, lumen, near_passes })
                 }

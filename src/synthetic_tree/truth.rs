@@ -446,9 +446,38 @@ pub fn features(layout: &Layout) -> (Vec<StenosisTruth>, Vec<AneurysmTruth>, Vec
     (stenoses, aneurysms, hairpins)
 }
 
+/// The radius of each point of `lines` (points with their arc lengths, as [`dense_points`]
+/// gives them): its distance to the lumen surface `F = 0`, found from the nearest surface vertex
+/// off the flat caps; `None` when a point has no closest surface point.
+pub fn surface_radii(
+    f: &(impl ImplicitFunction + ?Sized),
+    surface: &TriangulatedSurface,
+    lines: &[Vec<(Point3<f64>, f64)>],
+) -> Option<Vec<Vec<f64>>> {
+    use kiddo::{ImmutableKdTree, SquaredEuclidean};
+    // Seeds on F = 0 only (a flat cap's vertices lie inside the tube it closes).
+    let on_lumen: Vec<Point3<f64>> =
+        surface.vertices.iter().filter(|p| f.distance_estimate(p) <= 1e-9 * (1.0 + p.coords.norm())).copied().collect();
+    let points: Vec<[f64; 3]> = on_lumen.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points).ok()?;
+    let radii: Vec<Option<Vec<f64>>> = lines
+        .par_iter()
+        .map(|pts| {
+            pts.iter()
+                .map(|(p, _)| {
+                    let nearest = tree.query(&[p.x, p.y, p.z]).nearest_one::<SquaredEuclidean<f64>>().execute();
+                    let seed = on_lumen[nearest.item as usize];
+                    f.closest_point(p, &seed).map(|q| (q - p).norm())
+                })
+                .collect()
+        })
+        .collect();
+    radii.into_iter().collect()
+}
+
 /// The points of a vessel's centerline for the centerlines file: its samples with points added
 /// so that none is more than half the local radius from the next.
-fn dense_points(samples: &[Sample]) -> Vec<(Point3<f64>, f64)> {
+pub fn dense_points(samples: &[Sample]) -> Vec<(Point3<f64>, f64)> {
     let mut out = vec![(samples[0].p, samples[0].s)];
     for w in samples.windows(2) {
         let n = ((w[1].s - w[0].s) / (0.5 * w[0].r.min(w[1].r))).ceil().max(1.0) as usize;
@@ -472,26 +501,8 @@ pub fn centerlines(
     ends: &[(usize, EndCircle)],
     name: &str,
 ) -> Option<Centerlines> {
-    use kiddo::{ImmutableKdTree, SquaredEuclidean};
-    // Seeds on F = 0 only (a flat cap's vertices lie inside the tube it closes).
-    let on_lumen: Vec<Point3<f64>> =
-        surface.vertices.iter().filter(|p| f.distance_estimate(p) <= 1e-9 * (1.0 + p.coords.norm())).copied().collect();
-    let points: Vec<[f64; 3]> = on_lumen.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points).ok()?;
     let per_vessel: Vec<Vec<(Point3<f64>, f64)>> = layout.vessels.iter().map(|v| dense_points(&v.samples)).collect();
-    let radii: Vec<Option<Vec<f64>>> = per_vessel
-        .par_iter()
-        .map(|pts| {
-            pts.iter()
-                .map(|(p, _)| {
-                    let nearest = tree.query(&[p.x, p.y, p.z]).nearest_one::<SquaredEuclidean<f64>>().execute();
-                    let seed = on_lumen[nearest.item as usize];
-                    f.closest_point(p, &seed).map(|q| (q - p).norm())
-                })
-                .collect()
-        })
-        .collect();
-    let radii: Vec<Vec<f64>> = radii.into_iter().collect::<Option<_>>()?;
+    let radii = surface_radii(f, surface, &per_vessel)?;
     let mut polylines = Vec::new();
     for (id, (vessel, _)) in ends.iter().enumerate().skip(1) {
         let mut chain = vec![*vessel];

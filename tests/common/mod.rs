@@ -1,6 +1,8 @@
 //! Shared helpers of the integration tests.
 #![allow(dead_code)]
 
+pub mod topology;
+
 use indexmap::IndexMap;
 use nalgebra::{Matrix3, Point3, Vector3};
 use std::path::{Path, PathBuf};
