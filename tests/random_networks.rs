@@ -238,3 +238,50 @@ fn a_bad_seed_is_refused_in_one_line_and_nothing_is_written() {
         assert!(!out_dir.exists(), "{bad}: the output folder was created");
     }
 }
+
+/// Networks with loops are not meshed yet (issue 49), and meshing one never keeps quiet about
+/// it: two grafts (one loop each) and a ring meshed from their bare surfaces at coarse either
+/// are refused in one line that gives the truth's loop count, or written with a
+/// `surface_loops` warning giving it.
+#[test]
+fn meshing_a_network_says_its_loops() {
+    let dir = temp_dir("network-mesh");
+    for seed in [6, 21, 54] {
+        write_random_network(seed, None, &dir, SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
+        let truth: Value =
+            serde_json::from_slice(&std::fs::read(dir.join(format!("network_{seed}.json"))).unwrap()).unwrap();
+        let loops = truth["loops"]["count"].as_u64().unwrap();
+        assert!(loops >= 1, "seed {seed}: a network without a loop");
+        let said = format!("the surface has {loops} loop(s)");
+        let out = dir.join(format!("mesh_{seed}"));
+        let surface = dir.join(format!("network_{seed}.stl"));
+        let o = vesselhex(&[
+            "mesh",
+            "--surface",
+            path_str(&surface),
+            "--preset",
+            "coarse",
+            "--quiet",
+            "--output",
+            path_str(&out),
+        ]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        if o.status.code() == Some(1) {
+            assert!(stderr.contains(&said) && stderr.trim().lines().count() == 1, "seed {seed}: {stderr}");
+        } else {
+            let report: Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+            let warned = report["warnings"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|w| w["kind"] == "surface_loops" && w["message"].as_str().unwrap().contains(&said));
+            assert!(
+                warned,
+                "seed {seed}: exit {:?}, no surface_loops warning: {}",
+                o.status.code(),
+                report["warnings"]
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -66,18 +66,43 @@ pub(super) const UNIT_MISMATCH_FACTOR: f64 = 8.0;
 /// A warning when the (cleaned) surface has loops ([`crate::io::input::topology::handles`]):
 /// vesselhex meshes trees, so each loop is cut open where the paths from the inlet meet around
 /// it (a ring of generated vessels: a gap of about a diameter, each side ending as at an end).
-pub(super) fn loop_warning(surface: &TriangleSurface) -> Option<Warning> {
-    let loops = crate::io::input::topology::handles(&surface.triangles).filter(|&n| n > 0)?;
-    Some(Warning::new(
-        "surface_loops",
-        format!(
+pub(super) fn loop_warning(surface: &TriangleSurface, loops: usize) -> Option<Warning> {
+    (loops > 0).then(|| {
+        Warning::new(
+            "surface_loops",
+            format!(
             "{}: the surface has {loops} loop(s) (a ring of vessels such as a circle of Willis, a graft rejoining its \
              host, or two vessels fused where they touch): vesselhex meshes vessel trees, so each loop is cut open: a \
              stretch of it is left out of the mesh, which ends on either side as at a vessel end; networks with loops \
              are not meshed yet",
             surface.source.display()
         ),
-    ))
+        )
+    })
+}
+
+/// The loops of a (cleaned) surface ([`crate::io::input::topology::handles`]; none when it has
+/// no genus to speak of).
+pub(super) fn surface_loops(surface: &TriangleSurface) -> usize {
+    crate::io::input::topology::handles(&surface.triangles).unwrap_or(0)
+}
+
+/// A refusal of a surface with loops says so: where the paths from the inlet meet around a
+/// loop, the tree finds a path ending inside another, or an end that is none.
+pub(super) fn blame_loops(error: Error, loops: usize) -> Error {
+    if loops == 0 {
+        return error;
+    }
+    let why = format!(
+        "; the surface has {loops} loop(s) (a ring of vessels, a graft rejoining its host, or two vessels fused where \
+         they touch), and vesselhex meshes vessel trees: networks with loops are not meshed yet"
+    );
+    match error {
+        Error::Input { path, message } => Error::Input { path, message: message + &why },
+        Error::Geometry(message) => Error::Geometry(message + &why),
+        Error::ShortBranch { message, end_mm } => Error::ShortBranch { message: message + &why, end_mm },
+        other => other,
+    }
 }
 
 pub(super) fn check_units(surface: &LumenSurface, tree: &CenterlineTree, centerline_source: &Path) -> Result<()> {

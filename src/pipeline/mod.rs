@@ -141,8 +141,10 @@ pub fn mesh_surface(
     progress.stage("surface hygiene");
     let (surface, hygiene) = clean_surface(surface)?;
     settings.warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
-    settings.warnings.extend(checks::loop_warning(&surface));
-    let found = centerlines_of(&surface, centerlines, &settings.caps, &settings.inlets, progress)?;
+    let loops = checks::surface_loops(&surface);
+    settings.warnings.extend(checks::loop_warning(&surface, loops));
+    let found = centerlines_of(&surface, centerlines, &settings.caps, &settings.inlets, progress)
+        .map_err(|e| checks::blame_loops(e, loops))?;
     settings.warnings.extend(found.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
     let Found { centerlines, source: centerline_source, ends: found_ends, mut names, .. } = found;
     check_size(&surface, &centerlines, &centerline_source, &mut settings)?;
@@ -155,7 +157,8 @@ pub fn mesh_surface(
         found_ends.is_some(),
         &mut settings.warnings,
         progress,
-    )?;
+    )
+    .map_err(|e| checks::blame_loops(e, loops))?;
     settings.warnings.append(&mut meshed.notes);
     // The ends named by caps: found on the surface, or the given centerlines' ends.
     let (ends, inlet) = found_ends.clone().unwrap_or_else(|| ends::tree_ends(&meshed.tree));
