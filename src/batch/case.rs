@@ -7,6 +7,7 @@ use super::Settings;
 use crate::data::config::MeshConfig;
 use crate::data::error::{Error, Result};
 use crate::pipeline::MeshRequest;
+use crate::stages::annotation::inlets::InletMark;
 use crate::stages::centerline::extract::{ExtractOptions, InletChoice};
 use std::hash::Hasher;
 use std::path::{Path, PathBuf};
@@ -47,7 +48,7 @@ fn request(case: &Case, settings: &Settings, config: MeshConfig, output: &Path) 
         centerlines: case.centerlines.clone(),
         centerline_units: case.centerline_units,
         extraction: ExtractOptions {
-            inlet: case.inlet.as_ref().map_or(InletChoice::Largest, |p| InletChoice::Nearest(mm(p))),
+            inlet: case.inlets.first().map_or(InletChoice::Largest, |p| InletChoice::Nearest(mm(p))),
             ends: case.ends.iter().map(mm).collect(),
             sacs: case.sacs.iter().map(mm).collect(),
             caps: vec![],
@@ -60,7 +61,7 @@ fn request(case: &Case, settings: &Settings, config: MeshConfig, output: &Path) 
         quiet: true,
         reproducible: settings.reproducible,
         warnings: vec![],
-        inlets: vec![],
+        inlets: case.inlets.iter().map(|p| InletMark::Point(mm(p))).collect(),
         config,
     }
 }
@@ -94,7 +95,7 @@ pub fn fingerprint(case: &Case, settings: &Settings) -> Option<String> {
     };
     chunk(env!("CARGO_PKG_VERSION").as_bytes());
     chunk(&serde_json::to_vec(&config).ok()?);
-    let points = (&case.inlet, &case.ends, &case.sacs, &case.centerline_units, settings.reproducible);
+    let points = (&case.inlets, &case.ends, &case.sacs, &case.centerline_units, settings.reproducible);
     chunk(&serde_json::to_vec(&points).ok()?);
     let mut files: Vec<PathBuf> =
         [Some(&case.surface), case.centerlines.as_ref()].into_iter().flatten().cloned().collect();
@@ -162,7 +163,7 @@ mod tests {
         assert_eq!(fingerprint(&case, &coarse).unwrap(), base, "coarse is the default preset");
         let medium = Settings { preset: Some(Preset::Medium), ..Default::default() };
         assert_ne!(fingerprint(&case, &medium).unwrap(), base);
-        assert_ne!(fingerprint(&Case { inlet: Some([0.0; 3]), ..case.clone() }, &settings).unwrap(), base);
+        assert_ne!(fingerprint(&Case { inlets: vec![[0.0; 3]], ..case.clone() }, &settings).unwrap(), base);
         let reproducible = Settings { reproducible: true, ..Default::default() };
         assert_ne!(fingerprint(&case, &reproducible).unwrap(), base);
         // The same bytes elsewhere: the same fingerprint; other bytes: another.

@@ -31,8 +31,10 @@ pub struct Case {
     pub preset: Option<Preset>,
     pub formats: Option<Vec<String>>,
     pub output_units: Option<LengthUnit>,
-    /// Without centerlines: a point near the inlet, and points on ends and sacs (in `units`).
-    pub inlet: Option<[f64; 3]>,
+    /// Points near the inlets (in `units`), as `--inlet` given once per point: without
+    /// centerlines the first is the end they start from; every one is an inlet.
+    pub inlets: Vec<[f64; 3]>,
+    /// Without centerlines: points on ends and sacs (in `units`).
     pub ends: Vec<[f64; 3]>,
     pub sacs: Vec<[f64; 3]>,
     pub wall_surface: Option<PathBuf>,
@@ -203,7 +205,7 @@ fn case_of_row(row: &Map<String, Value>, base: &Path) -> std::result::Result<Cas
         preset,
         formats,
         output_units: unit(setting("output_units")?, "output_units")?,
-        inlet: points(read("inlet"), "inlet")?.first().copied(),
+        inlets: points(read("inlet"), "inlet")?,
         ends: points(read("ends"), "ends")?,
         sacs: points(read("sacs"), "sacs")?,
         wall_surface: setting("wall_surface")?.map(path),
@@ -293,7 +295,7 @@ mod tests {
         assert_eq!(cases[0].surface, PathBuf::from("/data/a.stl"));
         assert_eq!(cases[0].units, Some(LengthUnit::Cm));
         assert_eq!(cases[0].formats, Some(vec!["vtu".to_string(), "calculix".to_string()]));
-        assert_eq!(cases[0].inlet, Some([1.0, 2.0, 3.0]));
+        assert_eq!(cases[0].inlets, vec![[1.0, 2.0, 3.0]]);
         assert_eq!(cases[0].ends, vec![[4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]);
         assert_eq!(cases[0].preset, Some(Preset::Medium));
         assert_eq!(cases[1], Case { name: "b".into(), surface: "/data/sub/b.vtp".into(), ..Default::default() });
@@ -319,7 +321,7 @@ mod tests {
         let cases = cases_from_rows(&rows(json), Path::new("."), Path::new("m.json")).unwrap();
         assert_eq!(cases[0].name, "a");
         assert_eq!(cases[0].formats.as_deref(), Some(&["vtu".to_string(), "febio".to_string()][..]));
-        assert_eq!((cases[0].inlet, cases[0].ends.clone()), (Some([1.0, 2.0, 3.0]), vec![[1.0; 3], [2.0; 3]]));
+        assert_eq!((cases[0].inlets.clone(), cases[0].ends.clone()), (vec![[1.0, 2.0, 3.0]], vec![[1.0; 3], [2.0; 3]]));
     }
 
     #[test]
