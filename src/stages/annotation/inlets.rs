@@ -28,7 +28,7 @@ pub enum InletMark {
 
 /// Which of `ends` are inlets (parallel to `ends`): `root`, the end the tree was built from,
 /// every end a mark flags and every end named as an inlet (`names`, parallel to `ends`). Fails
-/// naming the mark when a cap name closes no end, or when a mark flags a sac.
+/// naming the mark when a cap name closes no end (a point flags the nearest end that is no sac).
 pub fn inlet_ends(
     ends: &[VesselEnd],
     names: &[Option<String>],
