@@ -172,15 +172,7 @@ fn the_cli_writes_the_same_bytes_as_the_library_whatever_the_thread_count() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let written = write_random_network(seed, None, &lib, SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
     let names = ["network_54.stl", "network_54.json", "network_54_centerlines.vtp"];
-    let mut listed: Vec<String> =
-        std::fs::read_dir(&cli).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
-    listed.sort();
-    let mut expected: Vec<String> = names.iter().map(|n| n.to_string()).collect();
-    expected.sort();
-    assert_eq!(listed, expected);
-    for name in names {
-        assert!(std::fs::read(cli.join(name)).unwrap() == std::fs::read(lib.join(name)).unwrap(), "{name} differs");
-    }
+    common::assert_same_files(&cli, &lib, &names);
     // One centerline polyline per segment, its ends at the segment's nodes.
     let centerlines = read_centerlines(&cli.join(names[2]), LengthUnit::Mm).unwrap();
     assert_eq!(centerlines.polylines.len(), written.network.segments.len());

@@ -56,15 +56,7 @@ fn the_cli_writes_the_same_bytes_as_the_library_whatever_the_thread_count() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let written = write_random_tree(seed, &lib, SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
     let names = ["tree_3.stl", "tree_3.json", "tree_3_centerlines.vtp"];
-    let mut listed: Vec<String> =
-        std::fs::read_dir(&cli).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
-    listed.sort();
-    let mut expected: Vec<String> = names.iter().map(|n| n.to_string()).collect();
-    expected.sort();
-    assert_eq!(listed, expected);
-    for name in names {
-        assert!(std::fs::read(cli.join(name)).unwrap() == std::fs::read(lib.join(name)).unwrap(), "{name} differs");
-    }
+    common::assert_same_files(&cli, &lib, &names);
     // The files read back as the mesher reads them: the surface's triangles, a centerline per outlet.
     let surface = read_surface(&cli.join(names[0]), LengthUnit::Mm).unwrap();
     assert_eq!(surface.triangles.len(), written.tree.surface.triangles.len());

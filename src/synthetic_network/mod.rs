@@ -231,16 +231,6 @@ impl RandomNetwork {
     }
 }
 
-/// The files of a network in `dir`: `<stem>.<stl|vtp>`, `<stem>.json` (the manifest),
-/// `<stem>_centerlines.vtp`.
-pub fn random_network_paths(stem: &str, dir: &Path, format: SurfaceFormat) -> [PathBuf; 3] {
-    [
-        dir.join(format!("{stem}.{}", format.extension())),
-        dir.join(format!("{stem}.json")),
-        dir.join(format!("{stem}_centerlines.vtp")),
-    ]
-}
-
 /// What [`write_random_network`] wrote.
 pub struct WrittenNetwork {
     pub surface: PathBuf,
@@ -262,7 +252,7 @@ pub fn write_random_network(
     let network = RandomNetwork::generate(seed, forced, progress)?;
     progress.stage(&format!("{}: centerlines", network.name));
     let centerlines = network.centerlines()?;
-    let [surface, manifest, centerline_path] = random_network_paths(&network.name, dir, format);
+    let [surface, manifest, centerline_path] = crate::synthetic_tree::generated_paths(&network.name, dir, format);
     let file_name = |p: &Path| p.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned());
     let text = serde_json::to_string_pretty(&network.manifest(&file_name(&surface), &file_name(&centerline_path)))
         .map_err(|e| Error::Geometry(format!("{}: the manifest cannot be written: {e}", network.name)))?;

@@ -251,10 +251,16 @@ impl SurfaceFormat {
 /// The files of tree `seed` in `dir`: `tree_<seed>.<stl|vtp>`, `tree_<seed>.json` (the
 /// manifest), `tree_<seed>_centerlines.vtp`.
 pub fn random_tree_paths(seed: u64, dir: &Path, format: SurfaceFormat) -> [PathBuf; 3] {
+    generated_paths(&format!("tree_{seed}"), dir, format)
+}
+
+/// The files of a generated vessel named `stem` in `dir` (a tree or a network):
+/// `<stem>.<stl|vtp>`, `<stem>.json` (the manifest), `<stem>_centerlines.vtp`.
+pub fn generated_paths(stem: &str, dir: &Path, format: SurfaceFormat) -> [PathBuf; 3] {
     [
-        dir.join(format!("tree_{seed}.{}", format.extension())),
-        dir.join(format!("tree_{seed}.json")),
-        dir.join(format!("tree_{seed}_centerlines.vtp")),
+        dir.join(format!("{stem}.{}", format.extension())),
+        dir.join(format!("{stem}.json")),
+        dir.join(format!("{stem}_centerlines.vtp")),
     ]
 }
 

@@ -596,3 +596,17 @@ pub fn assert_conformal(name: &str, mesh: &VesselMesh) {
     coords.dedup();
     assert_eq!(coords.len(), before, "{name}: coincident nodes");
 }
+
+/// `cli` holds exactly the files `names`, each byte-identical to its namesake in `lib` (a
+/// generator's command line against its library).
+pub fn assert_same_files(cli: &Path, lib: &Path, names: &[&str]) {
+    let mut listed: Vec<String> =
+        std::fs::read_dir(cli).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    listed.sort();
+    let mut expected: Vec<String> = names.iter().map(|n| n.to_string()).collect();
+    expected.sort();
+    assert_eq!(listed, expected);
+    for name in names {
+        assert!(std::fs::read(cli.join(name)).unwrap() == std::fs::read(lib.join(name)).unwrap(), "{name} differs");
+    }
+}
