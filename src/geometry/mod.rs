@@ -7,4 +7,5 @@ pub mod mesh;
 pub mod plane_cut;
 pub mod quality;
 pub mod surface;
+pub mod surface_cut;
 pub mod vector;

@@ -63,20 +63,21 @@ pub(super) const UNIT_MISMATCH_FACTOR: f64 = 8.0;
 
 /// Checks that the centerline radius matches the distance from the centerline to the surface;
 /// a factor of 10, 100 or 1000 means the two files are in different units.
-/// A warning when the (cleaned) surface has loops ([`crate::io::input::topology::handles`]):
-/// vesselhex meshes trees, so each loop is cut open where the paths from the inlet meet around
-/// it (a ring of generated vessels: a gap of about a diameter, each side ending as at an end).
-pub(super) fn loop_warning(surface: &TriangleSurface, loops: usize) -> Option<Warning> {
-    (loops > 0).then(|| {
+/// A warning when the (cleaned) surface has more loops ([`crate::io::input::topology::handles`])
+/// than the mesh closes (`joined`, the loops its tree joins again: see
+/// [`crate::stages::centerline::Junction::arriving`]): centerlines given as a tree, or cut open
+/// elsewhere, leave the rest of each loop out, and the mesh ends on either side as at a vessel end.
+pub(super) fn loop_warning(surface: &TriangleSurface, loops: usize, joined: usize) -> Option<Warning> {
+    (loops > joined).then(|| {
         Warning::new(
             "surface_loops",
             format!(
-            "{}: the surface has {loops} loop(s) (a ring of vessels such as a circle of Willis, a graft rejoining its \
-             host, or two vessels fused where they touch): vesselhex meshes vessel trees, so each loop is cut open: a \
-             stretch of it is left out of the mesh, which ends on either side as at a vessel end; networks with loops \
-             are not meshed yet",
-            surface.source.display()
-        ),
+                "{}: the surface has {loops} loop(s) (a ring of vessels such as a circle of Willis, a graft rejoining \
+                 its host, or two vessels fused where they touch) and the mesh closes {joined}: a stretch of each other \
+                 loop is left out, and the mesh ends on either side of it as at a vessel end. Let vesselhex find the \
+                 centerlines, or give centerline.loop_cuts_mm where your centerlines are cut open",
+                surface.source.display()
+            ),
         )
     })
 }
@@ -87,15 +88,16 @@ pub(super) fn surface_loops(surface: &TriangleSurface) -> usize {
     crate::io::input::topology::handles(&surface.triangles).unwrap_or(0)
 }
 
-/// A refusal of a surface with loops says so: where the paths from the inlet meet around a
-/// loop, the tree finds a path ending inside another, or an end that is none.
+/// A refusal of a surface with loops says so: centerlines given without the loops' cuts
+/// (`centerline.loop_cuts_mm`) make a path end inside another, or an end that is none.
 pub(super) fn blame_loops(error: Error, loops: usize) -> Error {
     if loops == 0 {
         return error;
     }
     let why = format!(
         "; the surface has {loops} loop(s) (a ring of vessels, a graft rejoining its host, or two vessels fused where \
-         they touch), and vesselhex meshes vessel trees: networks with loops are not meshed yet"
+         they touch): vesselhex meshes a loop by cutting it open across one vessel to find the centerlines, and \
+         joining that vessel again in the mesh"
     );
     match error {
         Error::Input { path, message } => Error::Input { path, message: message + &why },

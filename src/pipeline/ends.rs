@@ -26,7 +26,7 @@ pub(super) fn tree_ends(tree: &CenterlineTree) -> (Vec<VesselEnd>, usize) {
 /// inlet), then the last sample of each leaf branch.
 pub(super) fn tree_terminals(tree: &CenterlineTree) -> impl Iterator<Item = &CenterlineSample> {
     let inlets = tree.branches.iter().filter(|b| b.start_junction.is_none()).filter_map(|b| b.samples.first());
-    let outlets = tree.branches.iter().filter(|b| b.daughters.is_empty()).filter_map(|b| b.samples.last());
+    let outlets = tree.branches.iter().filter(|b| b.end_junction.is_none()).filter_map(|b| b.samples.last());
     inlets.chain(outlets)
 }
 
@@ -175,8 +175,17 @@ pub(super) fn side_openings(
 /// found as the domes to close (unless the configuration names them). Left to choose
 /// again, the tree would take the end with the widest vessel next to it, a daughter wider than a
 /// short trunk (sphinxsys_pulmonary_bifurcation), and report and mesh would disagree on the inlet.
-pub(super) fn keep_extracted_ends(config: &MeshConfig, found_ends: Option<&(Vec<VesselEnd>, usize)>) -> MeshConfig {
+/// The loops the extraction cut open (`loop_cuts`, mm) are joined again, unless the
+/// configuration names the cuts.
+pub(super) fn keep_extracted_ends(
+    config: &MeshConfig,
+    found_ends: Option<&(Vec<VesselEnd>, usize)>,
+    loop_cuts: &[[f64; 3]],
+) -> MeshConfig {
     let mut config = config.clone();
+    if config.centerline.loop_cuts_mm.is_empty() {
+        config.centerline.loop_cuts_mm = loop_cuts.to_vec();
+    }
     if let (Some((ends, _)), true) = (found_ends, config.centerline.sacs_mm.is_empty()) {
         config.centerline.sacs_mm =
             ends.iter().filter(|e| e.kind == EndKind::Sac).map(|e| e.centre.coords.into()).collect();

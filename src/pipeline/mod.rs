@@ -142,14 +142,13 @@ pub fn mesh_surface(
     let (surface, hygiene) = clean_surface(surface)?;
     settings.warnings.extend(hygiene.notes().into_iter().map(|n| Warning::new("surface_repaired", n)));
     let loops = checks::surface_loops(&surface);
-    settings.warnings.extend(checks::loop_warning(&surface, loops));
     let found = centerlines_of(&surface, centerlines, &settings.caps, &settings.inlets, progress)
         .map_err(|e| checks::blame_loops(e, loops))?;
     settings.warnings.extend(found.notes.iter().map(|n| Warning::new("centerlines", n.clone())));
-    let Found { centerlines, source: centerline_source, ends: found_ends, mut names, .. } = found;
+    let Found { centerlines, source: centerline_source, ends: found_ends, mut names, loop_cuts, .. } = found;
     check_size(&surface, &centerlines, &centerline_source, &mut settings)?;
     let config = &settings.config;
-    let tree_config = ends::keep_extracted_ends(config, found_ends.as_ref());
+    let tree_config = ends::keep_extracted_ends(config, found_ends.as_ref(), &loop_cuts);
     let (mut meshed, centerlines, short_branches) = policy::mesh_dropping_what_fails(
         &surface,
         centerlines,
@@ -160,6 +159,8 @@ pub fn mesh_surface(
     )
     .map_err(|e| checks::blame_loops(e, loops))?;
     settings.warnings.append(&mut meshed.notes);
+    let joined = meshed.tree.junctions.iter().map(|j| j.arriving.len()).sum();
+    settings.warnings.extend(checks::loop_warning(&surface, loops, joined));
     // The ends named by caps: found on the surface, or the given centerlines' ends.
     let (ends, inlet) = found_ends.clone().unwrap_or_else(|| ends::tree_ends(&meshed.tree));
     if found_ends.is_none() {
@@ -220,6 +221,9 @@ struct Found {
     ends: Option<(Vec<VesselEnd>, usize)>,
     names: Vec<Option<String>>,
     notes: Vec<String>,
+    /// Where the extraction cut the surface's loops open (mm; see
+    /// [`crate::data::config::CenterlineConfig::loop_cuts_mm`]).
+    loop_cuts: Vec<[f64; 3]>,
 }
 
 /// The centerline stage's first half: the centerlines given, or extracted from the (cleaned)
@@ -234,7 +238,7 @@ fn centerlines_of(
     Ok(match centerlines {
         CenterlineSource::Given(centerlines) => {
             let source = centerlines.source.clone();
-            Found { centerlines, source, ends: None, names: vec![], notes: vec![] }
+            Found { centerlines, source, ends: None, names: vec![], notes: vec![], loop_cuts: vec![] }
         }
         CenterlineSource::Extract(mut options) => {
             progress.stage("centerline extraction");
@@ -253,6 +257,7 @@ fn centerlines_of(
                 ends: Some((extraction.ends, extraction.inlet)),
                 names: extraction.end_names,
                 notes: extraction.notes,
+                loop_cuts: extraction.loop_cuts.iter().map(|c| c.centre.coords.into()).collect(),
             }
         }
     })

@@ -70,6 +70,12 @@ pub struct CenterlineConfig {
     /// of these points is a blind branch closed by a dome of hexes (no end face), not an outlet.
     /// Filled from the ends of kind "sac" when the centerlines are computed from the surface.
     pub sacs_mm: Vec<[f64; 3]>,
+    /// Where a network's loops were cut open, millimetres: the two branches that end within
+    /// twice their end radius of one of these points, one from either side, are one vessel, meshed as
+    /// one branch from junction to junction. Filled from the cuts the extraction made when the
+    /// centerlines are computed from a surface with loops; given, it joins centerlines that a
+    /// file gives cut open.
+    pub loop_cuts_mm: Vec<[f64; 3]>,
 }
 
 impl Default for CenterlineConfig {
@@ -83,6 +89,7 @@ impl Default for CenterlineConfig {
             junction_merge_radii: 1.0,
             inlet_mm: None,
             sacs_mm: Vec::new(),
+            loop_cuts_mm: Vec::new(),
         }
     }
 }
@@ -670,6 +677,9 @@ impl MeshConfig {
         }
         if c.sacs_mm.iter().any(|p| !p.iter().all(|x| x.is_finite())) {
             return bad("centerline.sacs_mm", "must be a list of points [x, y, z] of finite numbers (mm)");
+        }
+        if c.loop_cuts_mm.iter().any(|p| !p.iter().all(|x| x.is_finite())) {
+            return bad("centerline.loop_cuts_mm", "must be a list of points [x, y, z] of finite numbers (mm)");
         }
         self.febio.validate()?;
         if self.febio.static_steps > MAX_STEPS {

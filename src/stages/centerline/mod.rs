@@ -83,6 +83,9 @@ pub struct Junction {
     pub parent: usize,
     /// The branches that start here, in a stable order.
     pub daughters: Vec<usize>,
+    /// The branches besides the parent that end here: where a loop of a network closes (see
+    /// [`crate::data::config::CenterlineConfig::loop_cuts_mm`]). Empty in a tree.
+    pub arriving: Vec<usize>,
 }
 
 impl Branch {
@@ -198,7 +201,7 @@ impl CenterlineTree {
         if let Some(surface) = surface {
             junction_centre::centre_junctions(&mut rooted, surface);
         }
-        assemble(&rooted, config)
+        assemble(&rooted, config, path)
     }
 }
 
@@ -371,15 +374,21 @@ fn end_radius(skeleton: &Skeleton, v: usize) -> f64 {
 }
 
 /// Branches and junctions from the rooted tree, in its order; frames carried across junctions.
-fn assemble(rooted: &RootedTree, config: &CenterlineConfig) -> Result<CenterlineTree> {
+/// The two leaf edges that end at each of `config.loop_cuts_mm` are one branch (see
+/// [`loop_pairs`]): the first's, run on through the second reversed to the second's junction,
+/// where it arrives beside that junction's parent (see [`Junction::arriving`]).
+fn assemble(rooted: &RootedTree, config: &CenterlineConfig, source: &std::path::Path) -> Result<CenterlineTree> {
+    let pairs = loop_pairs(rooted, &config.loop_cuts_mm, source)?;
+    let joined_to: std::collections::HashMap<usize, usize> = pairs.iter().copied().collect();
+    let order: Vec<usize> = rooted.order.iter().copied().filter(|e| !pairs.iter().any(|p| p.1 == *e)).collect();
     let mut branch_of_edge = vec![usize::MAX; rooted.edges.len()];
-    for (b, &e) in rooted.order.iter().enumerate() {
+    for (b, &e) in order.iter().enumerate() {
         branch_of_edge[e] = b;
     }
     let mut junction_of_node = vec![usize::MAX; rooted.nodes.len()];
-    let mut branches: Vec<Branch> = Vec::with_capacity(rooted.order.len());
+    let mut branches: Vec<Branch> = Vec::with_capacity(order.len());
     let mut junctions: Vec<Junction> = vec![];
-    for (b, &e) in rooted.order.iter().enumerate() {
+    for (b, &e) in order.iter().enumerate() {
         let edge = &rooted.edges[e];
         let [from, to] = edge.ends;
         let parent = rooted.parent[from].map(|p| branch_of_edge[p]);
@@ -387,8 +396,17 @@ fn assemble(rooted: &RootedTree, config: &CenterlineConfig) -> Result<Centerline
             None => FirstFrame::Hint,
             Some(p) => FirstFrame::Carried(branches[p].samples[branches[p].samples.len() - 1].frame),
         };
-        let daughters: Vec<usize> = rooted.children[to].iter().map(|&d| branch_of_edge[d]).collect();
-        let samples = build_samples(&edge.line, config, first, !daughters.is_empty())?;
+        let daughters: Vec<usize> =
+            rooted.children[to].iter().map(|&d| branch_of_edge[d]).filter(|&d| d != usize::MAX).collect();
+        let line = match joined_to.get(&e) {
+            Some(&other) => {
+                let mut line = edge.line.clone();
+                line.extend(&rooted.edges[other].line.reversed());
+                line
+            }
+            None => edge.line.clone(),
+        };
+        let samples = build_samples(&line, config, first, !daughters.is_empty() || joined_to.contains_key(&e))?;
         let end_junction = if daughters.is_empty() {
             None
         } else {
@@ -400,6 +418,7 @@ fn assemble(rooted: &RootedTree, config: &CenterlineConfig) -> Result<Centerline
                 radius: node.radius,
                 parent: b,
                 daughters: daughters.clone(),
+                arriving: vec![],
             });
             Some(j)
         };
@@ -412,12 +431,59 @@ fn assemble(rooted: &RootedTree, config: &CenterlineConfig) -> Result<Centerline
             end_junction,
         });
     }
-    Ok(CenterlineTree {
-        branches,
-        junctions,
-        segments: rooted.order.clone(),
-        close_merges: rooted.close_merges.clone(),
-    })
+    for &(a, other) in &pairs {
+        let j = junction_of_node[rooted.edges[other].ends[0]];
+        let b = branch_of_edge[a];
+        branches[b].end_junction = Some(j);
+        junctions[j].arriving.push(b);
+    }
+    Ok(CenterlineTree { branches, junctions, segments: order, close_merges: rooted.close_merges.clone() })
+}
+
+/// A branch ends at a loop cut when its end lies within this many of its end radii of the cut:
+/// the extraction opens a loop with a gap of 1.5 vessel radii (see `extract::loops`), each
+/// end's centre half of it from the cut, and the radius at an open end is the least along the
+/// branch.
+const CUT_END_RADII: f64 = 2.0;
+
+/// The two leaf edges ending at each loop cut (mm; see [`CUT_END_RADII`]), the earlier in the
+/// tree's order first. Each must leave a junction, and not the same one.
+fn loop_pairs(rooted: &RootedTree, cuts: &[[f64; 3]], source: &std::path::Path) -> Result<Vec<(usize, usize)>> {
+    let mut pairs = vec![];
+    for cut in cuts {
+        let cut = Point3::from(*cut);
+        let at_cut: Vec<usize> = rooted
+            .order
+            .iter()
+            .copied()
+            .filter(|&e| {
+                let edge = &rooted.edges[e];
+                let last = edge.line.points.len() - 1;
+                rooted.children[edge.ends[1]].is_empty()
+                    && (edge.line.points[last] - cut).norm() < CUT_END_RADII * edge.line.radii[last]
+            })
+            .collect();
+        let from = |e: usize| rooted.edges[e].ends[0];
+        match at_cut[..] {
+            [a, b] if rooted.parent[from(a)].is_some() && rooted.parent[from(b)].is_some() && from(a) != from(b) => {
+                pairs.push((a, b))
+            }
+            _ => {
+                return Err(Error::input(
+                    source,
+                    format!(
+                    "the loop cut open at ({:.3}, {:.3}, {:.3}) mm (centerline.loop_cuts_mm) cannot be joined again: \
+                         {} vessel end(s) there, and two are needed, each on a branch from a different junction",
+                    cut.x,
+                    cut.y,
+                    cut.z,
+                    at_cut.len()
+                ),
+                ))
+            }
+        }
+    }
+    Ok(pairs)
 }
 
 /// How a branch's first frame is found.

@@ -499,6 +499,7 @@ fn analyse_junction(
     let x = junction.centre;
     let r_x = junction.radius;
     let mut members: Vec<(usize, bool)> = vec![(junction.parent, true)];
+    members.extend(junction.arriving.iter().map(|&b| (b, true)));
     members.extend(junction.daughters.iter().map(|&d| (d, false)));
     let where_ = || format!("the junction at {}", describe_point(&x));
     let dirs: Vec<(Vector3<f64>, f64)> = members

@@ -354,10 +354,12 @@ const NESTED: f64 = 1.5;
 
 /// The ends less those whose centre lies near a larger end's (see [`NESTED`]): pieces
 /// of one end (a cap slightly bent into several flat regions, a loop beside its cap) are one
-/// end, the largest piece. Order kept.
-pub fn merge_nested(ends: Vec<VesselEnd>) -> Vec<VesselEnd> {
-    let inside_larger =
-        |e: &VesselEnd| ends.iter().any(|o| o.radius > e.radius && (o.centre - e.centre).norm() < NESTED * o.radius);
+/// end, the largest piece. Order kept. Ends `at_cut` (where a loop was cut open: two ends facing
+/// each other across a small gap) are kept whatever their neighbours.
+pub fn merge_nested(ends: Vec<VesselEnd>, at_cut: impl Fn(&VesselEnd) -> bool) -> Vec<VesselEnd> {
+    let inside_larger = |e: &VesselEnd| {
+        !at_cut(e) && ends.iter().any(|o| o.radius > e.radius && (o.centre - e.centre).norm() < NESTED * o.radius)
+    };
     ends.iter().filter(|e| !inside_larger(e)).copied().collect()
 }
 

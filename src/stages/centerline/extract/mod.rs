@@ -51,6 +51,7 @@
 mod bridges;
 mod centring;
 mod ends;
+pub mod loops;
 mod medial;
 mod qhull;
 mod rounded;
@@ -138,13 +139,83 @@ pub struct Extraction {
     pub holes: Vec<Hole>,
     /// Facts worth telling the user (repairs, caps removed, ambiguous inlet).
     pub notes: Vec<String>,
+    /// Where the surface's loops were cut open to find its centerlines (see [`loops`]): the two
+    /// polylines ending at each cut, one from either side, are one vessel. Not in `ends`.
+    pub loop_cuts: Vec<loops::LoopCut>,
 }
 
 /// Computes the centerlines of a lumen surface (millimetres). Never panics on bad geometry:
-/// failures (too few ends, an end not connected to the inlet) are errors naming the fix.
+/// failures (too few ends, an end not connected to the inlet) are errors naming the fix. A
+/// surface with loops is cut open at one place per loop first (see [`loops`]).
 pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) -> Result<Extraction> {
+    let loops = topology::handles(&surface.triangles).unwrap_or(0);
+    if loops == 0 {
+        return extract_tree(surface, options, &[]);
+    }
     let mut notes = vec![];
-    let mut search = EndSearch::new(surface, &options.caps, &mut notes)?;
+    let mut search = EndSearch::new(surface, &options.caps, &[], &mut notes)?;
+    search.add_given(&options.ends, EndKind::Given)?;
+    search.join_parts();
+    let end_names = ends::names_of_ends(&search.found, &options.caps).map_err(|e| Error::input(&surface.source, e))?;
+    let inlet = match (options.inlet, named_inlet(&search.found, &end_names, &options.inlet_names)) {
+        (InletChoice::Largest, Some(k)) => k,
+        (choice, _) => ends::choose_inlet(&search.found, choice),
+    };
+    let inlet_node = search.end_nodes[inlet];
+    let (opened, cuts) = loops::open_loops(surface, &search.graph, inlet_node, &search.lumen, loops)
+        .map_err(|e| Error::input(&surface.source, e))?;
+    // The inlet chosen on the whole surface: a cut's end may be wider than it.
+    let options = ExtractOptions { inlet: InletChoice::Nearest(search.found[inlet].centre), ..options.clone() };
+    let mut extraction = extract_tree(&opened, &options, &cuts)?;
+    extraction.take_out_cut_ends(&cuts).map_err(|e| Error::input(&surface.source, e))?;
+    extraction.notes.push(format!(
+        "the surface has {loops} loop(s): cut open at {} to find the centerlines, and joined again in the mesh",
+        cuts.iter()
+            .map(|c| format!("({:.3}, {:.3}, {:.3}) mm", c.centre.x, c.centre.y, c.centre.z))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    extraction.loop_cuts = cuts;
+    Ok(extraction)
+}
+
+impl Extraction {
+    /// Takes the two ends each cut opened out of the ends (the nearest open ends, within the
+    /// cut's radius of it).
+    fn take_out_cut_ends(&mut self, cuts: &[loops::LoopCut]) -> std::result::Result<(), String> {
+        for cut in cuts {
+            let mut at_cut: Vec<usize> = (0..self.ends.len())
+                .filter(|&k| {
+                    self.ends[k].kind == EndKind::Open && (self.ends[k].centre - cut.centre).norm() < cut.radius
+                })
+                .collect();
+            if at_cut.len() != 2 || at_cut.contains(&self.inlet) {
+                return Err(format!(
+                    "the loop cut open at ({:.3}, {:.3}, {:.3}) mm gave {} end(s) there, not 2: the loop cannot be joined \
+                     again; give the centerlines instead",
+                    cut.centre.x,
+                    cut.centre.y,
+                    cut.centre.z,
+                    at_cut.len()
+                ));
+            }
+            at_cut.sort_unstable();
+            for &k in at_cut.iter().rev() {
+                self.ends.remove(k);
+                self.end_names.remove(k);
+                if self.inlet > k {
+                    self.inlet -= 1;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// [`extract_centerlines`] on a surface without loops: as it came, or opened at `cuts`.
+fn extract_tree(surface: &TriangleSurface, options: &ExtractOptions, cuts: &[loops::LoopCut]) -> Result<Extraction> {
+    let mut notes = vec![];
+    let mut search = EndSearch::new(surface, &options.caps, cuts, &mut notes)?;
     search.add_given(&options.ends, EndKind::Given)?;
     search.add_given(&options.sacs, EndKind::Sac)?;
     // Each search below grows from the paths to the ends found before it, so the parts of the
@@ -180,7 +251,7 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
     }
     let polylines = trace(&graph, &found, &end_nodes, inlet, &lumen)?;
     let centerlines = Centerlines { polylines, source: surface.source.clone() };
-    Ok(Extraction { centerlines, ends: found, inlet, end_names, holes, notes })
+    Ok(Extraction { centerlines, ends: found, inlet, end_names, holes, notes, loop_cuts: vec![] })
 }
 
 /// The end a cap's name makes the inlet, unless the user chose another by a point: the first
@@ -232,7 +303,14 @@ struct EndSearch {
 impl EndSearch {
     /// The medial axis, and the ends with a boundary: loops and cut flat caps that span the
     /// vessel behind them.
-    fn new(surface: &TriangleSurface, given_caps: &[NamedCap], notes: &mut Vec<String>) -> Result<EndSearch> {
+    /// The two ends each of `cuts` opened face each other a small gap apart: they are not
+    /// merged as pieces of one end.
+    fn new(
+        surface: &TriangleSurface,
+        given_caps: &[NamedCap],
+        cuts: &[loops::LoopCut],
+        notes: &mut Vec<String>,
+    ) -> Result<EndSearch> {
         let (source, vertices) = (&surface.source, &surface.vertices);
         // Wound consistently for the closing below. Callers pass a surface `clean_surface` has
         // already wound (and reported): nothing is left to flip.
@@ -276,7 +354,8 @@ impl EndSearch {
             cap.triangles.iter().for_each(|&t| in_cap[t as usize] = true);
             found.push(cap.end);
         }
-        found = ends::merge_nested(found);
+        let at_cut = |e: &VesselEnd| cuts.iter().any(|c| (e.centre - c.centre).norm() < c.radius);
+        found = ends::merge_nested(found, at_cut);
         let open: Vec<[u32; 3]> = triangles.iter().zip(&in_cap).filter(|(_, c)| !**c).map(|(t, _)| *t).collect();
         let inward = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
         let lumen = LumenSurface::from_parts(vertices.clone(), open, source.clone())?;
