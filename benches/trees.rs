@@ -19,7 +19,6 @@
 //! ([`vesselhex::synthetic_tree::separation`]) by cause, the near passes whose gap the
 //! triangulated surface closes where the implicit lumen keeps it open, and the trees per bin.
 
-use nalgebra::Point3;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -28,7 +27,10 @@ use std::time::Instant;
 use vesselhex::progress::Progress;
 use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
 use vesselhex::testing::mutations::Written;
-use vesselhex::testing::suite::{bar_missed, mesh, shorten, Run};
+use vesselhex::testing::suite::{mesh, Run};
+
+mod population;
+use population::{judge, print_causes, seeds, true_ends};
 use vesselhex::units::LengthUnit;
 
 /// Runs at once (CI machines and the reference farm have 2 cores).
@@ -56,60 +58,6 @@ struct Row {
     bins: Vec<String>,
     /// Why it fails; nothing when it passes.
     cause: Option<String>,
-}
-
-/// The seeds `VESSELHEX_TREE_SEEDS` names: FIRST-LAST or a comma-separated list.
-fn seeds() -> Vec<u64> {
-    let text = std::env::var("VESSELHEX_TREE_SEEDS").unwrap_or_else(|_| "1-200".to_string());
-    let number =
-        |t: &str| t.trim().parse::<u64>().unwrap_or_else(|_| panic!("VESSELHEX_TREE_SEEDS: '{t}' is not a seed"));
-    match text.split_once('-') {
-        Some((a, b)) => (number(a)..=number(b)).collect(),
-        None => text.split(',').map(number).collect(),
-    }
-}
-
-/// The true ends of a manifest: centre and radius (mm).
-fn true_ends(manifest: &serde_json::Value) -> Vec<(Point3<f64>, f64)> {
-    let ends = manifest["ends"].as_array().cloned().unwrap_or_default();
-    ends.iter()
-        .map(|e| {
-            let c = |k: usize| e["centre"][k].as_f64().unwrap_or(f64::NAN);
-            (Point3::new(c(0), c(1), c(2)), e["radius_mm"].as_f64().unwrap_or(f64::NAN))
-        })
-        .collect()
-}
-
-/// Judges a run against the truth: (ends found, found and meshed, the cause of a failure).
-fn judge(run: &Run, truth: &[(Point3<f64>, f64)]) -> (usize, usize, Option<String>) {
-    let (mut found, mut meshed, mut missing) = (0, 0, None);
-    for (k, (centre, radius)) in truth.iter().enumerate() {
-        let nearest = run.ends.iter().min_by(|a, b| (a.centre - centre).norm().total_cmp(&(b.centre - centre).norm()));
-        match nearest.filter(|e| (e.centre - centre).norm() <= *radius) {
-            Some(e) => {
-                found += 1;
-                meshed += usize::from(e.meshed);
-            }
-            None => {
-                let d = nearest.map_or(f64::INFINITY, |e| (e.centre - centre).norm());
-                missing.get_or_insert(format!(
-                    "true end {k} at ({:.2}, {:.2}, {:.2}) not found (nearest end {d:.2} mm, radius {radius:.2} mm)",
-                    centre.x, centre.y, centre.z
-                ));
-            }
-        }
-    }
-    let cause = if run.exit != Some(0) {
-        let code = run.exit.map_or("a signal".to_string(), |c| c.to_string());
-        Some(format!("exit {code}: {}", shorten(run.error.trim_start_matches("vesselhex: error: "), 200)))
-    } else if let Some(m) = missing {
-        Some(m)
-    } else if meshed < truth.len() || run.ends.iter().any(|e| !e.meshed) {
-        Some(format!("{meshed} of {} true ends meshed ({} ends in the report)", truth.len(), run.ends.len()))
-    } else {
-        bar_missed(run)
-    };
-    (found, meshed, cause)
 }
 
 /// Writes tree `seed` into `dir` and meshes it at every preset.
@@ -191,43 +139,6 @@ fn print_bins(rows: &[&Row]) {
     }
 }
 
-/// `text` with each number (sign, digits, decimal point) written `#`.
-fn numbers_blanked(text: &str) -> String {
-    let chars: Vec<char> = text.chars().collect();
-    let digit_at = |k: usize| chars.get(k).is_some_and(char::is_ascii_digit);
-    let (mut out, mut k) = (String::new(), 0);
-    while k < chars.len() {
-        if digit_at(k) || (chars[k] == '-' && digit_at(k + 1)) {
-            k += 1;
-            while digit_at(k) || (chars.get(k) == Some(&'.') && digit_at(k + 1)) {
-                k += 1;
-            }
-            out.push('#');
-        } else {
-            out.push(chars[k]);
-            k += 1;
-        }
-    }
-    out
-}
-
-/// The failures of `rows` grouped by the start of their cause with its numbers blanked.
-fn print_causes(rows: &[&Row]) {
-    let mut groups: BTreeMap<String, Vec<(u64, &str)>> = BTreeMap::new();
-    for r in rows {
-        if let Some(cause) = &r.cause {
-            let key = shorten(&numbers_blanked(cause), 60);
-            groups.entry(key).or_default().push((r.seed, cause));
-        }
-    }
-    let mut groups: Vec<_> = groups.into_iter().collect();
-    groups.sort_by_key(|g| std::cmp::Reverse(g.1.len()));
-    for (key, members) in groups {
-        let seeds: Vec<String> = members.iter().map(|m| m.0.to_string()).collect();
-        println!("  {:>3} x {key}\n        seeds {}; e.g. {}", members.len(), seeds.join(", "), members[0].1);
-    }
-}
-
 /// The separation survey (`VESSELHEX_TREE_SEPARATION=1`): per seed, the fused pairs and the
 /// near passes the surface closes; then the counts by cause and the trees per bin.
 fn survey_separation(seeds: &[u64]) {
@@ -296,7 +207,7 @@ fn survey_separation(seeds: &[u64]) {
 }
 
 fn main() {
-    let seeds = seeds();
+    let seeds = seeds("VESSELHEX_TREE_SEEDS", "1-200");
     if std::env::var_os("VESSELHEX_TREE_SEPARATION").is_some() {
         survey_separation(&seeds);
         return;
@@ -353,6 +264,7 @@ fn main() {
         println!("pass rate by bin:");
         print_bins(&of);
         println!("failures by cause:");
-        print_causes(&of);
+        let failures: Vec<(u64, &str)> = of.iter().filter_map(|r| Some((r.seed, r.cause.as_deref()?))).collect();
+        print_causes(&failures);
     }
 }

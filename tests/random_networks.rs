@@ -299,3 +299,35 @@ fn a_network_meshes_with_its_loops_closed() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Centerlines given cut open on a loop are joined where `centerline.loop_cuts_mm` says (issue
+/// 49): graft 6's centerlines as the extraction finds them (cut open on the graft), given back
+/// with the cut point, mesh with the loop closed (boundary Euler characteristic 0, conformal);
+/// given without it, the mesh leaves the loop open and says so (`surface_loops`), its two cut
+/// ends meshed as ends.
+#[test]
+fn given_centerlines_cut_open_are_joined_at_the_cuts_named() {
+    use vesselhex::centerline_extract::{extract_centerlines, ExtractOptions, InletChoice};
+    use vesselhex::pipeline::{mesh_surface, CenterlineSource};
+    let dir = temp_dir("network-given");
+    write_random_network(6, None, &dir, SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
+    let surface = vesselhex::input::read_surface(&dir.join("network_6.stl"), LengthUnit::Mm).unwrap();
+    let options = ExtractOptions { inlet: InletChoice::Nearest(nalgebra::Point3::origin()), ..Default::default() };
+    let (clean, _) = vesselhex::input::clean_surface(surface.clone()).unwrap();
+    let extraction = extract_centerlines(&clean, &options).unwrap();
+    assert_eq!(extraction.loop_cuts.len(), 1, "graft 6 has one loop");
+    let cut: [f64; 3] = extraction.loop_cuts[0].centre.coords.into();
+    for (cuts, loops_left) in [(vec![cut], 0), (vec![], 1)] {
+        let mut settings = common::coarse_settings();
+        settings.config.centerline.loop_cuts_mm = cuts;
+        let given = CenterlineSource::Given(extraction.centerlines.clone());
+        let vessel = mesh_surface(surface.clone(), given, settings, &mut Progress::new(true, 0)).unwrap();
+        let mesh = &vessel.meshed.mesh;
+        common::assert_conformal("graft 6", mesh);
+        assert_eq!(boundary_euler(mesh), 2 - 2 * (1 - loops_left), "graft 6, {loops_left} loop(s) left open");
+        assert_eq!(mesh.ends.len(), 2 + 2 * loops_left as usize, "graft 6: ends");
+        let warned = vessel.settings.warnings.iter().any(|w| w.kind == "surface_loops");
+        assert_eq!(warned, loops_left > 0, "graft 6: {:?}", vessel.settings.warnings);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
