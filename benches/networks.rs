@@ -16,8 +16,6 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 use vesselhex::progress::Progress;
 use vesselhex::synthetic_network::write_random_network;
 use vesselhex::synthetic_tree::SurfaceFormat;
@@ -26,10 +24,7 @@ use vesselhex::testing::suite::{mesh, Run};
 use vesselhex::units::LengthUnit;
 
 mod population;
-use population::{judge, print_causes, seeds, true_ends};
-
-/// Runs at once (CI machines and the reference farm have 2 cores).
-const PARALLEL: usize = 2;
+use population::{judge, print_causes, run_seeds, seeds, true_ends};
 
 /// One network meshed at one preset.
 struct Row {
@@ -156,25 +151,8 @@ fn main() {
         "{:>5} {:<7} {:<17} {:>6} {:>4} {:>9} {:>7} {:>6} {:>6} {:>6}  cause",
         "seed", "preset", "shape", "inlets", "exit", "ends t/m", "min SJ", "wall", "skew", "s"
     );
-    let next = AtomicUsize::new(0);
-    let rows = Mutex::new(Vec::new());
-    std::thread::scope(|scope| {
-        for _ in 0..PARALLEL {
-            scope.spawn(|| {
-                while let Some(&seed) = seeds.get(next.fetch_add(1, Ordering::SeqCst)) {
-                    let dir = root.join(format!("network_{seed}"));
-                    let done = run_seed(seed, &dir, &binary, &presets);
-                    if keep.is_none() {
-                        let _ = std::fs::remove_dir_all(&dir);
-                    }
-                    let mut rows = rows.lock().unwrap_or_else(|e| e.into_inner());
-                    done.iter().for_each(|r| println!("{}", format_row(r)));
-                    rows.extend(done);
-                }
-            });
-        }
-    });
-    let mut rows = rows.into_inner().unwrap_or_else(|e| e.into_inner());
+    let each = |seed: u64, dir: &Path| run_seed(seed, dir, &binary, &presets);
+    let mut rows = run_seeds(&seeds, &root, "network", keep.is_some(), each, format_row);
     rows.sort_by_key(|r| (presets.iter().position(|p| *p == r.preset), r.seed));
     for preset in &presets {
         let of: Vec<&Row> = rows.iter().filter(|r| &r.preset == preset).collect();

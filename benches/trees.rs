@@ -21,8 +21,6 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 use std::time::Instant;
 use vesselhex::progress::Progress;
 use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
@@ -30,11 +28,8 @@ use vesselhex::testing::mutations::Written;
 use vesselhex::testing::suite::{mesh, Run};
 
 mod population;
-use population::{judge, print_causes, seeds, true_ends};
+use population::{judge, print_causes, run_seeds, seeds, true_ends};
 use vesselhex::units::LengthUnit;
-
-/// Runs at once (CI machines and the reference farm have 2 cores).
-const PARALLEL: usize = 2;
 
 /// The bins of the population table, as the manifest names them.
 const BINS: [(&str, &str); 6] = [
@@ -223,27 +218,8 @@ fn main() {
     let keep = std::env::var_os("VESSELHEX_TREE_KEEP").map(PathBuf::from);
     let root = keep.clone().unwrap_or_else(|| scratch.path().to_path_buf());
     println!("{}", header());
-    let next = AtomicUsize::new(0);
-    let rows = Mutex::new(Vec::new());
-    std::thread::scope(|scope| {
-        for _ in 0..PARALLEL {
-            scope.spawn(|| {
-                while let Some(&seed) = seeds.get(next.fetch_add(1, Ordering::SeqCst)) {
-                    let dir = root.join(format!("tree_{seed}"));
-                    let done = run_seed(seed, &dir, &binary, &presets);
-                    if keep.is_none() {
-                        let _ = std::fs::remove_dir_all(&dir);
-                    }
-                    let mut rows = rows.lock().unwrap_or_else(|e| e.into_inner());
-                    for r in &done {
-                        println!("{}", format_row(r));
-                    }
-                    rows.extend(done);
-                }
-            });
-        }
-    });
-    let mut rows = rows.into_inner().unwrap_or_else(|e| e.into_inner());
+    let each = |seed: u64, dir: &Path| run_seed(seed, dir, &binary, &presets);
+    let mut rows = run_seeds(&seeds, &root, "tree", keep.is_some(), each, format_row);
     rows.sort_by_key(|r| (presets.iter().position(|p| *p == r.preset), r.seed));
     for preset in &presets {
         let of: Vec<&Row> = rows.iter().filter(|r| &r.preset == preset).collect();

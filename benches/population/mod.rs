@@ -92,3 +92,36 @@ pub fn print_causes(failures: &[(u64, &str)]) {
         println!("  {:>3} x {key}\n        seeds {}; e.g. {}", members.len(), seeds.join(", "), members[0].1);
     }
 }
+
+/// Runs `each` on every seed, two at a time (CI machines and the reference farm have 2 cores),
+/// in a folder of its own under `root` named `name_SEED` (removed after unless `keep`); prints
+/// each row as it comes (`line`) and returns them all.
+pub fn run_seeds<R: Send>(
+    seeds: &[u64],
+    root: &std::path::Path,
+    name: &str,
+    keep: bool,
+    each: impl Fn(u64, &std::path::Path) -> Vec<R> + Sync,
+    line: impl Fn(&R) -> String + Sync,
+) -> Vec<R> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let next = AtomicUsize::new(0);
+    let rows = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..2 {
+            scope.spawn(|| {
+                while let Some(&seed) = seeds.get(next.fetch_add(1, Ordering::SeqCst)) {
+                    let dir = root.join(format!("{name}_{seed}"));
+                    let done = each(seed, &dir);
+                    if !keep {
+                        let _ = std::fs::remove_dir_all(&dir);
+                    }
+                    let mut rows = rows.lock().unwrap_or_else(|e| e.into_inner());
+                    done.iter().for_each(|r| println!("{}", line(r)));
+                    rows.extend(done);
+                }
+            });
+        }
+    });
+    rows.into_inner().unwrap_or_else(|e| e.into_inner())
+}
