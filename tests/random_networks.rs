@@ -293,7 +293,9 @@ fn a_network_meshes_with_its_loops_closed() {
             assert_eq!(end.is_inlet, e["role"] == "inlet", "{what}: the end at {p} is a {}", e["role"]);
         }
         let warnings = &vessel.settings.warnings;
-        assert!(warnings.iter().all(|w| w.kind != "surface_loops"), "{what}: {warnings:?}");
+        let loop_or_inlet =
+            |w: &&vesselhex::data::diagnostics::Warning| w.kind == "surface_loops" || w.kind == "inlet_guessed";
+        assert!(!warnings.iter().any(|w| loop_or_inlet(&w)), "{what}: {warnings:?}");
         let report = vesselhex::pipeline::vessel_report(&vessel, &vessel.settings.config, &[]);
         assert!(report.within_bars, "{what}: a bar is not held");
     }
@@ -329,5 +331,32 @@ fn given_centerlines_cut_open_are_joined_at_the_cuts_named() {
         let warned = vessel.settings.warnings.iter().any(|w| w.kind == "surface_loops");
         assert_eq!(warned, loops_left > 0, "graft 6: {:?}", vessel.settings.warnings);
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A network meshed with no inlet flagged is fed through its largest end, and the user is told
+/// so (`inlet_guessed`, naming that end): graft 6 from its bare surface, no `--inlet`.
+#[test]
+fn a_network_with_no_inlet_flagged_says_which_end_it_took() {
+    use vesselhex::pipeline::{mesh_surface, CenterlineSource};
+    let dir = temp_dir("network-unflagged");
+    write_random_network(6, None, &dir, SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
+    let surface = vesselhex::input::read_surface(&dir.join("network_6.stl"), LengthUnit::Mm).unwrap();
+    let extract = CenterlineSource::Extract(Default::default());
+    let vessel = mesh_surface(surface, extract, common::coarse_settings(), &mut Progress::new(true, 0)).unwrap();
+    let inlets: Vec<&vesselhex::mesh::VesselEnd> = vessel.meshed.mesh.ends.iter().filter(|e| e.is_inlet).collect();
+    assert_eq!(inlets.len(), 1, "one inlet");
+    let warning = vessel.settings.warnings.iter().find(|w| w.kind == "inlet_guessed");
+    let message = warning.map(|w| w.message.clone()).unwrap_or_default();
+    // The end it names (the cap's centre) is the mesh's inlet (its end section's centre, within
+    // the inlet's radius of 0.54 mm).
+    let named: Vec<f64> = message
+        .split_once("the largest end, at (")
+        .and_then(|(_, rest)| rest.split_once(')'))
+        .map(|(xyz, _)| xyz.split(", ").filter_map(|x| x.parse().ok()).collect())
+        .unwrap_or_default();
+    assert_eq!(named.len(), 3, "no inlet_guessed warning naming an end: {:?}", vessel.settings.warnings);
+    let gap = (inlets[0].centre - nalgebra::Point3::new(named[0], named[1], named[2])).norm();
+    assert!(gap < 0.5, "the warning names an end {gap} mm from the mesh's inlet: {message}");
     let _ = std::fs::remove_dir_all(&dir);
 }

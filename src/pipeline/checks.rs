@@ -82,6 +82,39 @@ pub(super) fn loop_warning(surface: &TriangleSurface, loops: usize, joined: usiz
     })
 }
 
+/// A warning when a network with loops meshed (`joined` of them closed) has the one inlet
+/// nobody flagged: the largest end (`ends[inlet]`). Networks are often fed through several ends,
+/// and which cannot be told from their size (in the generated networks, inlets and outlets
+/// overlap in radius), so the user is asked, the next largest ends named.
+pub(super) fn lone_inlet_warning(
+    surface: &TriangleSurface,
+    joined: usize,
+    ends: &[crate::stages::centerline::extract::VesselEnd],
+    inlet: usize,
+) -> Option<Warning> {
+    (joined > 0).then(|| {
+        let at = |k: usize| {
+            let e = &ends[k];
+            format!("({:.3}, {:.3}, {:.3}) mm (radius {:.3} mm)", e.centre.x, e.centre.y, e.centre.z, e.radius)
+        };
+        let mut others: Vec<usize> = (0..ends.len()).filter(|&k| k != inlet).collect();
+        others.sort_by(|&a, &b| ends[b].radius.total_cmp(&ends[a].radius).then(a.cmp(&b)));
+        let next: Vec<String> = others.iter().take(2).map(|&k| at(k)).collect();
+        Warning::new(
+            "inlet_guessed",
+            format!(
+                "{}: the network has {joined} loop(s) and no inlet was flagged: its one inlet is the largest end, at \
+                 {}, and every other end an outlet; a network is often fed through several ends (a circle of Willis: \
+                 both internal carotids and the basilar artery), which their size does not tell: flag each with \
+                 --inlet x,y,z (the next largest ends: {})",
+                surface.source.display(),
+                at(inlet),
+                next.join(", ")
+            ),
+        )
+    })
+}
+
 /// The loops of a (cleaned) surface ([`crate::io::input::topology::handles`]; none when it has
 /// no genus to speak of).
 pub(super) fn surface_loops(surface: &TriangleSurface) -> usize {

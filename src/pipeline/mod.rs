@@ -136,6 +136,14 @@ pub fn mesh_surface(
     let config = &settings.config;
     checks::check_settings(config)?;
     check_inlet_caps(&settings.inlets, &settings.caps)?;
+    let inlet_flagged = !settings.inlets.is_empty()
+        || settings.caps.iter().any(|c| crate::stages::centerline::extract::is_inlet_name(&c.name))
+        || match &centerlines {
+            CenterlineSource::Extract(o) => {
+                o.inlet != crate::stages::centerline::extract::InletChoice::Largest || !o.inlet_names.is_empty()
+            }
+            CenterlineSource::Given(_) => true,
+        };
     crate::pipeline::finishing::check_wall_surfaces(config)?;
     settings.warnings.extend(checks::settings_warnings(config));
     progress.stage("surface hygiene");
@@ -169,6 +177,9 @@ pub fn mesh_surface(
     name_mesh_ends(&mut meshed.mesh, &ends, &names);
     let inlets = inlet_ends(&ends, &names, inlet, &settings.inlets).map_err(Error::Config)?;
     mark_inlets(&mut meshed.mesh, &ends, &inlets, &names);
+    if !inlet_flagged {
+        settings.warnings.extend(checks::lone_inlet_warning(&surface, joined, &ends, inlet));
+    }
     let openings = ends::side_openings(&surface, found_ends.as_ref().map_or(&[][..], |(e, _)| e), &short_branches);
     let limits = ReadLimits::within(settings.max_memory);
     let asked: Vec<SideOpening> = openings.iter().flatten().copied().collect();
