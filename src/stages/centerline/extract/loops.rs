@@ -48,6 +48,10 @@ const CLEAN_ALONG: f64 = 1.0;
 /// that no end is linked to the other side's balls (the path to it would come the other way
 /// round the loop, and the vessel between would be taken for a blind end).
 const CUT_GAP: f64 = 1.5;
+/// The two ends a cut opens lie half its gap (0.75 radii) either side of it, a little further
+/// where the section is not round (beside a junction): an end within this many of the cut's
+/// radii of it is one of them.
+const CUT_END_REACH: f64 = 2.0;
 /// Clean cuts tried along one cycle before the next: a cut that does not open the loop (a
 /// section around two vessels that touch) is seldom followed by one that does so near it.
 const CUT_TRIES: usize = 8;
@@ -93,6 +97,12 @@ pub(super) fn open_loops(
         ));
     }
     Ok((opened, cuts))
+}
+
+/// Whether `p` is near one of `cuts` (see [`CUT_END_REACH`]): an end there is one of the two
+/// the cut opened.
+pub(super) fn near_a_cut(cuts: &[LoopCut], p: &Point3<f64>) -> bool {
+    cuts.iter().any(|c| (p - c.centre).norm() < CUT_END_REACH * c.radius)
 }
 
 /// A long cycle of the ball graph: its nodes from where it leaves the inlet's tree round to

@@ -180,15 +180,19 @@ pub fn extract_centerlines(surface: &TriangleSurface, options: &ExtractOptions) 
 }
 
 impl Extraction {
-    /// Takes the two ends each cut opened out of the ends (the nearest open ends, within the
-    /// cut's radius of it).
+    /// Takes the two ends each cut opened out of the ends (the two nearest open ends near it,
+    /// see [`loops::near_a_cut`]).
     fn take_out_cut_ends(&mut self, cuts: &[loops::LoopCut]) -> std::result::Result<(), String> {
         for cut in cuts {
+            let gap = |k: usize| (self.ends[k].centre - cut.centre).norm();
             let mut at_cut: Vec<usize> = (0..self.ends.len())
                 .filter(|&k| {
-                    self.ends[k].kind == EndKind::Open && (self.ends[k].centre - cut.centre).norm() < cut.radius
+                    self.ends[k].kind == EndKind::Open
+                        && loops::near_a_cut(std::slice::from_ref(cut), &self.ends[k].centre)
                 })
                 .collect();
+            at_cut.sort_by(|&a, &b| gap(a).total_cmp(&gap(b)).then(a.cmp(&b)));
+            at_cut.truncate(2);
             if at_cut.len() != 2 || at_cut.contains(&self.inlet) {
                 return Err(format!(
                     "the loop cut open at ({:.3}, {:.3}, {:.3}) mm gave {} end(s) there, not 2: the loop cannot be joined \
@@ -327,7 +331,14 @@ impl EndSearch {
         let solid = SolidSurface::new(&closed_vertices, &closed_triangles);
         let tets = solid.map(|solid| bridges::LumenTets::new(tessellation, node_of, samples, solid));
 
-        let (mut found, holes) = ends::loop_ends(vertices, &loops, |c, radius| graph.pole(c, 0.5 * radius).radius);
+        let (mut found, mut holes) = ends::loop_ends(vertices, &loops, |c, radius| graph.pole(c, 0.5 * radius).radius);
+        // A cut's two loops are ends by construction, whatever the ball behind them: beside a
+        // junction that ball is the junction's, larger than the cut vessel, as behind a hole.
+        let at_a_cut = |c: &Point3<f64>| loops::near_a_cut(cuts, c);
+        for hole in holes.iter().filter(|h| at_a_cut(&h.centre)) {
+            found.push(VesselEnd { centre: hole.centre, radius: hole.radius, kind: EndKind::Open });
+        }
+        holes.retain(|h| !at_a_cut(&h.centre));
         notes.extend(holes.iter().map(|h| {
             format!(
                 "a boundary loop at ({:.3}, {:.3}, {:.3}) mm of radius {:.3} mm was left out as a hole in the wall \
@@ -354,7 +365,7 @@ impl EndSearch {
             cap.triangles.iter().for_each(|&t| in_cap[t as usize] = true);
             found.push(cap.end);
         }
-        let at_cut = |e: &VesselEnd| cuts.iter().any(|c| (e.centre - c.centre).norm() < c.radius);
+        let at_cut = |e: &VesselEnd| loops::near_a_cut(cuts, &e.centre);
         found = ends::merge_nested(found, at_cut);
         let open: Vec<[u32; 3]> = triangles.iter().zip(&in_cap).filter(|(_, c)| !**c).map(|(t, _)| *t).collect();
         let inward = topology::vertex_normals(vertices, &open).into_iter().map(|n| n * sign).collect();
