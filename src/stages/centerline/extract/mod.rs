@@ -196,7 +196,8 @@ impl Extraction {
             if at_cut.len() != 2 || at_cut.contains(&self.inlet) {
                 return Err(format!(
                     "the loop cut open at ({:.3}, {:.3}, {:.3}) mm gave {} end(s) there, not 2: the loop cannot be joined \
-                     again; give the centerlines instead",
+                     again; give centerlines cut open on a vessel of the loop, with the cut point as \
+                     centerline.loop_cuts_mm",
                     cut.centre.x,
                     cut.centre.y,
                     cut.centre.z,
@@ -307,8 +308,10 @@ struct EndSearch {
 impl EndSearch {
     /// The medial axis, and the ends with a boundary: loops and cut flat caps that span the
     /// vessel behind them.
-    /// The two ends each of `cuts` opened face each other a small gap apart: they are not
-    /// merged as pieces of one end.
+    ///
+    /// The two ends each of `cuts` opened (see [`loops::near_a_cut`]) are ends whatever the
+    /// ball behind them, and never merged as pieces of another end: they face each other across
+    /// a gap of about a diameter.
     fn new(
         surface: &TriangleSurface,
         given_caps: &[NamedCap],
