@@ -93,7 +93,10 @@ fn check_contract(name: &str, tree: &CenterlineTree) {
 /// surface. Returns the worst relative radius error.
 fn check_junctions_in_lumen(name: &str, tree: &CenterlineTree, lumen: &LumenSurface) -> f64 {
     let mut worst: f64 = 0.0;
-    for (j, Junction { centre, radius, parent, daughters }) in tree.junctions.iter().enumerate() {
+    for (j, Junction { centre, radius, parent, daughters, arriving }) in tree.junctions.iter().enumerate() {
+        // A tree's junctions have their parent as their one arriving branch (only a loop's
+        // closing branch arrives beside it).
+        assert!(arriving.is_empty(), "{name}: junction {j} has branches {arriving:?} arriving beside its parent");
         let distance = lumen.closest(centre).distance;
         let winding = lumen.winding_number(centre);
         let error = (radius - distance).abs() / distance;
