@@ -15,7 +15,7 @@
 //! meshes in DIR.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use vesselhex::progress::Progress;
 use vesselhex::synthetic_network::write_random_network;
 use vesselhex::synthetic_tree::SurfaceFormat;
@@ -24,7 +24,7 @@ use vesselhex::testing::suite::{mesh, Run};
 use vesselhex::units::LengthUnit;
 
 mod population;
-use population::{judge, print_causes, run_seeds, seeds, true_ends};
+use population::{judge, print_causes, run_seeds, seeds, settings, true_ends};
 
 /// One network meshed at one preset.
 struct Row {
@@ -137,15 +137,8 @@ fn print_by(title: &str, rows: &[&Row], key: impl Fn(&Row) -> String) {
 
 fn main() {
     let seeds = seeds("VESSELHEX_NETWORK_SEEDS", "1-100");
-    let presets: Vec<String> = std::env::var("VESSELHEX_NETWORK_PRESETS")
-        .unwrap_or_else(|_| "coarse".to_string())
-        .split(',')
-        .map(|s| s.trim().to_string())
-        .collect();
-    let binary = std::env::var_os("VESSELHEX_NETWORK_BIN")
-        .map_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_vesselhex")), PathBuf::from);
+    let (presets, binary, keep) = settings("VESSELHEX_NETWORK");
     let scratch = tempfile::tempdir().expect("a temporary folder");
-    let keep = std::env::var_os("VESSELHEX_NETWORK_KEEP").map(PathBuf::from);
     let root = keep.clone().unwrap_or_else(|| scratch.path().to_path_buf());
     println!(
         "{:>5} {:<7} {:<17} {:>6} {:>4} {:>9} {:>7} {:>6} {:>6} {:>6}  cause",

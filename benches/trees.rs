@@ -20,7 +20,7 @@
 //! triangulated surface closes where the implicit lumen keeps it open, and the trees per bin.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 use vesselhex::progress::Progress;
 use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
@@ -28,7 +28,7 @@ use vesselhex::testing::mutations::Written;
 use vesselhex::testing::suite::{mesh, Run};
 
 mod population;
-use population::{judge, print_causes, run_seeds, seeds, true_ends};
+use population::{judge, print_causes, run_seeds, seeds, settings, true_ends};
 use vesselhex::units::LengthUnit;
 
 /// The bins of the population table, as the manifest names them.
@@ -207,15 +207,8 @@ fn main() {
         survey_separation(&seeds);
         return;
     }
-    let presets: Vec<String> = std::env::var("VESSELHEX_TREE_PRESETS")
-        .unwrap_or_else(|_| "coarse".to_string())
-        .split(',')
-        .map(|s| s.trim().to_string())
-        .collect();
-    let binary = std::env::var_os("VESSELHEX_TREE_BIN")
-        .map_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_vesselhex")), PathBuf::from);
+    let (presets, binary, keep) = settings("VESSELHEX_TREE");
     let scratch = tempfile::tempdir().expect("a temporary folder");
-    let keep = std::env::var_os("VESSELHEX_TREE_KEEP").map(PathBuf::from);
     let root = keep.clone().unwrap_or_else(|| scratch.path().to_path_buf());
     println!("{}", header());
     let each = |seed: u64, dir: &Path| run_seed(seed, dir, &binary, &presets);

@@ -125,3 +125,17 @@ pub fn run_seeds<R: Send>(
     });
     rows.into_inner().unwrap_or_else(|e| e.into_inner())
 }
+
+/// The presets `{prefix}_PRESETS` names (comma-separated, default coarse), the `vesselhex` to
+/// mesh with (`{prefix}_BIN`, default this build's) and the folder to keep the runs in
+/// (`{prefix}_KEEP`), as the population benchmarks read them.
+pub fn settings(prefix: &str) -> (Vec<String>, std::path::PathBuf, Option<std::path::PathBuf>) {
+    let presets = std::env::var(format!("{prefix}_PRESETS"))
+        .unwrap_or_else(|_| "coarse".to_string())
+        .split(',')
+        .map(|s| s.trim().to_string())
+        .collect();
+    let binary = std::env::var_os(format!("{prefix}_BIN"))
+        .map_or_else(|| std::path::PathBuf::from(env!("CARGO_BIN_EXE_vesselhex")), std::path::PathBuf::from);
+    (presets, binary, std::env::var_os(format!("{prefix}_KEEP")).map(std::path::PathBuf::from))
+}
