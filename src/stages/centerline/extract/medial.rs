@@ -28,6 +28,57 @@ impl PartialOrd for Entry {
     }
 }
 
+/// [`BallGraph::pole`] over `nodes`, given the `near` ones in increasing order (every ball
+/// that can reach the point; any superset will do): the same ball whichever superset.
+fn pole_among<'a>(nodes: &[Ball], near: impl Iterator<Item = &'a Ball> + Clone, p: &Point3<f64>, reach: f64) -> Ball {
+    let gap = |b: &Ball| (b.centre - p).norm() - b.radius;
+    let reaching = near.filter(|b| gap(b) <= reach.max(0.1 * b.radius)).max_by(|a, b| a.radius.total_cmp(&b.radius));
+    reaching
+        .or_else(|| nodes.iter().min_by(|a, b| gap(a).total_cmp(&gap(b))))
+        .copied()
+        .unwrap_or(Ball { centre: *p, radius: 0.0 })
+}
+
+/// The balls of a graph filed by centre, for many [`BallGraph::pole`] queries (one per boundary
+/// loop and per flat-cap candidate: thousands on a marching-cubes surface, each a scan of every
+/// ball without it). Answers exactly as `pole` does on the graph's balls when it was made.
+pub struct PoleIndex<'a> {
+    nodes: &'a [Ball],
+    tree: Option<kiddo::ImmutableKdTree<f64, 3>>,
+    widest: f64,
+}
+
+impl<'a> PoleIndex<'a> {
+    pub fn new(graph: &'a BallGraph) -> PoleIndex<'a> {
+        let centres: Vec<[f64; 3]> = graph.nodes.iter().map(|b| b.centre.into()).collect();
+        let all_finite = centres.iter().flatten().all(|x| x.is_finite());
+        let tree = all_finite.then(|| kiddo::ImmutableKdTree::new_from_slice(&centres).ok()).flatten();
+        let widest = graph.nodes.iter().map(|b| b.radius).fold(0.0, f64::max);
+        PoleIndex { nodes: &graph.nodes, tree, widest }
+    }
+
+    /// [`BallGraph::pole`]: a ball reaches the point only if its centre lies within its radius
+    /// plus `reach` or a tenth of its radius, so within 1.1 x the widest radius plus `reach`.
+    pub fn pole(&self, p: &Point3<f64>, reach: f64) -> Ball {
+        let bound = 1.1 * self.widest + if reach.is_finite() { reach.max(0.0) } else { 0.0 };
+        let (Some(tree), true) = (&self.tree, reach < f64::INFINITY && bound.is_finite()) else {
+            return pole_among(self.nodes, self.nodes.iter(), p, reach);
+        };
+        // A little slack: the tree's squared distances round differently from `norm`.
+        let within = bound * (1.0 + 1e-9) + 1e-12;
+        let mut near: Vec<usize> = tree
+            .query(&[p.x, p.y, p.z])
+            .within::<kiddo::SquaredEuclidean<f64>>(within * within)
+            .unsorted()
+            .execute()
+            .iter()
+            .map(|h| h.item as usize)
+            .collect();
+        near.sort_unstable();
+        pole_among(self.nodes, near.iter().map(|&i| &self.nodes[i]), p, reach)
+    }
+}
+
 /// A path through the lumen from node `from` to node `to` of another part of the graph,
 /// through `balls` (see `bridges`).
 #[derive(Debug, Clone)]
@@ -76,15 +127,7 @@ impl BallGraph {
     /// triangles; `reach` (half a patch's radius, say) keeps a small crease at the point from
     /// hiding the vessel around it.
     pub fn pole(&self, p: &Point3<f64>, reach: f64) -> Ball {
-        let gap = |b: &Ball| (b.centre - p).norm() - b.radius;
-        let near = self
-            .nodes
-            .iter()
-            .filter(|b| gap(b) <= reach.max(0.1 * b.radius))
-            .max_by(|a, b| a.radius.total_cmp(&b.radius));
-        near.or_else(|| self.nodes.iter().min_by(|a, b| gap(a).total_cmp(&gap(b))))
-            .copied()
-            .unwrap_or(Ball { centre: *p, radius: 0.0 })
+        pole_among(&self.nodes, self.nodes.iter(), p, reach)
     }
 
     /// The links of node `n`: (other node, cost).
@@ -157,5 +200,48 @@ impl BallGraph {
             }
         }
         (prev, dist)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic scatter of balls, small and large, some centred on the same point.
+    fn scatter() -> BallGraph {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut nodes: Vec<Ball> = (0..2000)
+            .map(|_| Ball {
+                centre: Point3::new(20.0 * next(), 10.0 * next(), 5.0 * next()),
+                radius: 0.05 + 2.0 * next() * next(),
+            })
+            .collect();
+        nodes.push(Ball { centre: nodes[7].centre, radius: nodes[7].radius });
+        let links = vec![vec![]; nodes.len()];
+        BallGraph::from_parts(nodes, links)
+    }
+
+    #[test]
+    fn the_pole_index_answers_as_the_scan_of_every_ball() {
+        let graph = scatter();
+        let index = PoleIndex::new(&graph);
+        for i in 0..400 {
+            let t = i as f64;
+            let p = Point3::new((t * 0.37) % 26.0 - 3.0, (t * 0.61) % 13.0 - 1.5, (t * 0.29) % 8.0 - 1.5);
+            for reach in [0.0, 0.3, 2.5, f64::INFINITY, f64::NAN] {
+                let (a, b) = (graph.pole(&p, reach), index.pole(&p, reach));
+                assert_eq!((a.centre, a.radius.to_bits()), (b.centre, b.radius.to_bits()), "at {p:?}, reach {reach}");
+            }
+        }
+        for p in [Point3::new(100.0, 0.0, 0.0), Point3::new(-50.0, 40.0, 3.0)] {
+            let (a, b) = (graph.pole(&p, 0.1), index.pole(&p, 0.1));
+            assert_eq!(a.centre, b.centre, "far from every ball, the ball reaching nearest");
+        }
     }
 }

@@ -334,7 +334,8 @@ impl EndSearch {
         let solid = SolidSurface::new(&closed_vertices, &closed_triangles);
         let tets = solid.map(|solid| bridges::LumenTets::new(tessellation, node_of, samples, solid));
 
-        let (mut found, mut holes) = ends::loop_ends(vertices, &loops, |c, radius| graph.pole(c, 0.5 * radius).radius);
+        let poles = medial::PoleIndex::new(&graph);
+        let (mut found, mut holes) = ends::loop_ends(vertices, &loops, |c, radius| poles.pole(c, 0.5 * radius).radius);
         // A cut's two loops are ends by construction, whatever the ball behind them: beside a
         // junction that ball is the junction's, larger than the cut vessel, as behind a hole.
         let at_a_cut = |c: &Point3<f64>| loops::near_a_cut(cuts, c);
@@ -357,7 +358,7 @@ impl EndSearch {
             Some(tags) => (ends::tagged_caps(vertices, &triangles, tags, given_caps), vec![]),
             None => ends::find_caps(vertices, &triangles, tags)
                 .into_iter()
-                .filter(|cap| cap.end.radius >= CAP_SPAN * graph.pole(&cap.end.centre, 0.5 * cap.end.radius).radius)
+                .filter(|cap| cap.end.radius >= CAP_SPAN * poles.pole(&cap.end.centre, 0.5 * cap.end.radius).radius)
                 .partition(|cap| cap.sharp_rim),
         };
         if !caps.is_empty() {
