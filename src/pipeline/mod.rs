@@ -425,7 +425,7 @@ pub fn mesh_tree(
         branch_names: &names,
         surface: lumen_surface,
     };
-    let (mut mesh, junction_of, junction_variant) = finish_junctions(&inputs);
+    let (mut mesh, junction_of, junction_variants) = finish_junctions(&inputs);
 
     progress.stage("annotation");
     annotate(&mut mesh);
@@ -435,7 +435,7 @@ pub fn mesh_tree(
     progress.stage("surface accuracy");
     let aligned: Vec<Branch> = plans.into_iter().map(|p| p.branch).collect();
     let accuracy = surface_accuracy(&mesh, lumen_surface, &aligned, &projected)?;
-    Ok(Meshed { mesh, tree, projected, accuracy, templates, junctions, junction_of, junction_variant, notes: vec![] })
+    Ok(Meshed { mesh, tree, projected, accuracy, templates, junctions, junction_of, junction_variants, notes: vec![] })
 }
 
 /// Meshes a vessel (both inputs in mm) and runs the added stages its settings ask for: what

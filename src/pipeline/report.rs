@@ -337,12 +337,12 @@ fn build_report(
                 spine_axis: g.spine_axis().map(Into::into),
                 wall_growth: match config.wall.growth {
                     WallGrowth::Ray => JunctionWall::Ray,
-                    WallGrowth::Normal => meshed.junction_variant.wall,
+                    WallGrowth::Normal => meshed.junction_variants[g.index].wall,
                 },
-                surface_nodes_slid: meshed.junction_variant.optimisation.slide_surface_nodes,
-                pattern_search: meshed.junction_variant.optimisation.pattern_search,
-                pages_moved: meshed.junction_variant.optimisation.move_pages,
-                surface_smoothed: meshed.junction_variant.optimisation.smooth_surface,
+                surface_nodes_slid: meshed.junction_variants[g.index].optimisation.slide_surface_nodes,
+                pattern_search: meshed.junction_variants[g.index].optimisation.pattern_search,
+                pages_moved: meshed.junction_variants[g.index].optimisation.move_pages,
+                surface_smoothed: meshed.junction_variants[g.index].optimisation.smooth_surface,
                 elements: elements.len(),
                 // A sac branch's transition is the junction's too, but the sac is the branch's.
                 sac_elements: if crate::stages::annotation::sacs::holds_sac(g) {

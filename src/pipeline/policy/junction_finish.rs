@@ -1,7 +1,8 @@
 //! How a branched vessel's junctions are finished: the volume is built with each finish of a
 //! round (how the junction optimisation may move the lumen's nodes, and how the junction's wall
-//! grows), each judged on its junctions' elements and its wall, and the best kept; a round
-//! after the first is built only while no finish meets the bars.
+//! grows), each judged on its junctions' elements and its wall. The best finish is kept, with
+//! each junction's own nodes taken from the finish best for that junction (see [`compose`]); a
+//! round after the first is built only while no such mesh meets the bars.
 
 use crate::data::config::WallGrowth;
 use crate::geometry::mesh::VesselMesh;
@@ -10,9 +11,17 @@ use crate::stages::volume::{
 };
 use rayon::prelude::*;
 
-/// A volume built with one junction finish: mesh, junction of each element, the finish, and
-/// its figures.
-type FinishedVolume = (VesselMesh, Vec<Option<usize>>, JunctionVariant, FinishQuality);
+/// A volume built with junction finishes: the mesh, the junction of each element, each
+/// junction's finish, each element's validity (infinite for a lumen element outside every
+/// junction: the same in every finish) and the figures.
+#[derive(Clone)]
+struct FinishedVolume {
+    mesh: VesselMesh,
+    junction_of: Vec<Option<usize>>,
+    variants: Vec<JunctionVariant>,
+    validity: Vec<f64>,
+    quality: FinishQuality,
+}
 
 /// What a branched vessel's finish is judged by: its worst junction element, its worst junction
 /// wall element and its wall's mean scaled Jacobian.
@@ -48,6 +57,22 @@ impl FinishQuality {
         };
         let wall = &validity[mesh.wall_range()];
         let wall_mean = wall.iter().map(|q| q.max(-1.0)).sum::<f64>() / wall.len().max(1) as f64;
+        FinishQuality { worst: worst(false), worst_wall: worst(true), wall_mean }
+    }
+
+    /// The figures of some elements alone (one junction's): their worst, the worst of those in
+    /// the wall, and the mean over those in the wall (1 when none is).
+    fn of_elements(mesh: &VesselMesh, validity: &[f64], elements: &[usize]) -> FinishQuality {
+        let worst = |in_wall: bool| {
+            elements
+                .iter()
+                .filter(|&&e| !in_wall || mesh.regions[e].is_wall())
+                .map(|&e| validity[e])
+                .fold(f64::INFINITY, f64::min)
+        };
+        let wall: Vec<f64> = elements.iter().filter(|&&e| mesh.regions[e].is_wall()).map(|&e| validity[e]).collect();
+        let wall_mean =
+            if wall.is_empty() { 1.0 } else { wall.iter().map(|q| q.max(-1.0)).sum::<f64>() / wall.len() as f64 };
         FinishQuality { worst: worst(false), worst_wall: worst(true), wall_mean }
     }
 
@@ -131,24 +156,18 @@ fn walls(has_junctions: bool, growth: WallGrowth) -> Vec<JunctionWall> {
     }
 }
 
-/// The figures of a finish: its junctions' elements and its wall (the rest is the same in
-/// every finish).
-fn judge(mesh: &VesselMesh, junction_of: &[Option<usize>]) -> FinishQuality {
-    let sj: Vec<f64> = (0..mesh.hexes.len())
+/// Each element's validity in a finish: its junctions' elements and its wall (the rest is the
+/// same in every finish, infinite here).
+fn validities(mesh: &VesselMesh, junction_of: &[Option<usize>]) -> Vec<f64> {
+    (0..mesh.hexes.len())
         .into_par_iter()
         .map(|e| {
             if junction_of[e].is_none() && !mesh.regions[e].is_wall() {
                 return f64::INFINITY;
             }
-            let q = crate::geometry::quality::validity(&mesh.corners(e));
-            if q.is_nan() {
-                f64::NEG_INFINITY
-            } else {
-                q
-            }
+            element_validity(mesh, e)
         })
-        .collect();
-    FinishQuality::of(mesh, &sj, |e| junction_of[e].is_some())
+        .collect()
 }
 
 /// The finishes of one round, built side by side; the choice is made in their fixed order, so
@@ -156,12 +175,15 @@ fn judge(mesh: &VesselMesh, junction_of: &[Option<usize>]) -> FinishQuality {
 fn build_round(inputs: &VolumeInputs, round: &[JunctionOptimisation], walls: &[JunctionWall]) -> Vec<FinishedVolume> {
     let built: Vec<_> =
         round.par_iter().map(|&optimisation| (optimisation, build_volume(inputs, optimisation, walls))).collect();
+    let junctions = inputs.junctions.len();
     built
         .into_iter()
         .flat_map(|(optimisation, (meshes, junction_of))| {
             meshes.into_iter().zip(walls).map(move |(mesh, &wall)| {
-                let q = judge(&mesh, &junction_of);
-                (mesh, junction_of.clone(), JunctionVariant { wall, optimisation }, q)
+                let validity = validities(&mesh, &junction_of);
+                let quality = FinishQuality::of(&mesh, &validity, |e| junction_of[e].is_some());
+                let variants = vec![JunctionVariant { wall, optimisation }; junctions];
+                FinishedVolume { mesh, junction_of: junction_of.clone(), variants, validity, quality }
             })
         })
         .collect()
@@ -169,23 +191,120 @@ fn build_round(inputs: &VolumeInputs, round: &[JunctionOptimisation], walls: &[J
 
 /// The index of the best finish (see [`FinishQuality::better_than`]), the first of equals.
 fn best_of(built: &[FinishedVolume]) -> usize {
-    (1..built.len()).fold(0, |best, i| if built[i].3.better_than(&built[best].3) { i } else { best })
+    (1..built.len()).fold(0, |best, i| if built[i].quality.better_than(&built[best].quality) { i } else { best })
 }
 
-/// The vessel's volume with its junctions finished in the best way tried (see [`rounds`]): the
-/// mesh, each element's junction, and the finish.
-pub(crate) fn finish_junctions(inputs: &VolumeInputs) -> (VesselMesh, Vec<Option<usize>>, JunctionVariant) {
+/// For each node, the junction whose elements are the only ones to hold it (`None`: a node of
+/// an element outside every junction, or of two junctions' elements).
+fn owned_nodes(mesh: &VesselMesh, junction_of: &[Option<usize>]) -> Vec<Option<usize>> {
+    // usize::MAX: not yet seen; None: shared.
+    let mut owner = vec![Some(usize::MAX); mesh.nodes.len()];
+    for (hex, junction) in mesh.hexes.iter().zip(junction_of) {
+        for &n in hex {
+            let o = &mut owner[n as usize];
+            if *o == Some(usize::MAX) {
+                *o = *junction;
+            } else if o != junction {
+                *o = None;
+            }
+        }
+    }
+    owner.into_iter().map(|o| o.filter(|&j| j != usize::MAX)).collect()
+}
+
+/// The best finish with each junction's own nodes ([`owned_nodes`]) taken from the finish best
+/// for that junction's elements, when that makes the mesh better; `None` otherwise.
+///
+/// Why: a tree's junctions differ (a wide Y, a small side branch, a crotch against a
+/// neighbour), and the finish one needs can spoil another. Chosen for the whole vessel, the best
+/// finish of a tree of twenty junctions had some junction short of a bar in every round, so every
+/// round was built (most of a large tree's time). The finishes share their elements and nodes,
+/// and a junction's own nodes move only its own elements: the other elements keep their figures,
+/// and a junction's elements are judged again with its new nodes beside the kept ones (a junction
+/// whose mixed elements are not better stays as it was).
+fn compose(built: &[FinishedVolume], junctions: usize) -> Option<FinishedVolume> {
+    let base = &built[best_of(built)];
+    let alike = |f: &FinishedVolume| f.mesh.hexes == base.mesh.hexes && f.junction_of == base.junction_of;
+    if junctions == 0 || built.len() < 2 || !built.iter().all(alike) {
+        return None;
+    }
+    let mut elements_of: Vec<Vec<usize>> = vec![vec![]; junctions];
+    for (e, j) in base.junction_of.iter().enumerate() {
+        if let Some(j) = *j {
+            elements_of[j].push(e);
+        }
+    }
+    let mut nodes_of: Vec<Vec<usize>> = vec![vec![]; junctions];
+    for (n, j) in owned_nodes(&base.mesh, &base.junction_of).into_iter().enumerate() {
+        if let Some(j) = j {
+            nodes_of[j].push(n);
+        }
+    }
+    let (mut mesh, mut validity, mut variants) = (base.mesh.clone(), base.validity.clone(), base.variants.clone());
+    let mut changed = false;
+    for j in 0..junctions {
+        let local = |validity: &[f64]| FinishQuality::of_elements(&base.mesh, validity, &elements_of[j]);
+        let kept = local(&base.validity);
+        let best = (0..built.len())
+            .fold(None::<(usize, FinishQuality)>, |best, i| {
+                let q = local(&built[i].validity);
+                match best {
+                    Some((_, b)) if !q.better_than(&b) => best,
+                    _ => Some((i, q)),
+                }
+            })
+            .filter(|(_, q)| q.better_than(&kept));
+        let Some((i, _)) = best else { continue };
+        for &n in &nodes_of[j] {
+            mesh.nodes[n] = built[i].mesh.nodes[n];
+        }
+        let mixed: Vec<f64> = elements_of[j].par_iter().map(|&e| element_validity(&mesh, e)).collect();
+        let mut trial = validity.clone();
+        elements_of[j].iter().zip(&mixed).for_each(|(&e, &q)| trial[e] = q);
+        if local(&trial).better_than(&kept) {
+            validity = trial;
+            variants[j] = built[i].variants[j];
+            changed = true;
+        } else {
+            for &n in &nodes_of[j] {
+                mesh.nodes[n] = base.mesh.nodes[n];
+            }
+        }
+    }
+    let junction_of = base.junction_of.clone();
+    let quality = FinishQuality::of(&mesh, &validity, |e| junction_of[e].is_some());
+    (changed && quality.better_than(&base.quality)).then_some(FinishedVolume {
+        mesh,
+        junction_of,
+        variants,
+        validity,
+        quality,
+    })
+}
+
+/// The best of the finishes built and their composition.
+fn best_quality(built: &[FinishedVolume], composed: &Option<FinishedVolume>) -> FinishQuality {
+    composed.as_ref().map_or(built[best_of(built)].quality, |c| c.quality)
+}
+
+/// The vessel's volume with its junctions finished in the best way tried (see [`rounds`] and
+/// [`compose`]): the mesh, each element's junction, and each junction's finish.
+pub(crate) fn finish_junctions(inputs: &VolumeInputs) -> (VesselMesh, Vec<Option<usize>>, Vec<JunctionVariant>) {
     let has_junctions = !inputs.junctions.is_empty();
+    let junctions = inputs.junctions.len();
     let walls = walls(has_junctions, inputs.wall_growth);
     let (mut built, mut reserve): (Vec<FinishedVolume>, Vec<FinishedVolume>) = (Vec::new(), Vec::new());
+    let mut composed = None;
     for (k, round) in rounds(has_junctions).iter().enumerate() {
-        if k > 0 && built[best_of(&built)].3.meets_bars() {
+        if k > 0 && best_quality(&built, &composed).meets_bars() {
             break;
         }
-        let (normal, rest): (Vec<_>, Vec<_>) =
-            build_round(inputs, round, &walls).into_iter().partition(|f| f.2.wall == JunctionWall::Normal);
+        let (normal, rest): (Vec<_>, Vec<_>) = build_round(inputs, round, &walls)
+            .into_iter()
+            .partition(|f| f.variants.first().is_some_and(|v| v.wall == JunctionWall::Normal));
         built.extend(rest);
         reserve.extend(normal);
+        composed = compose(&built, junctions);
     }
     // Still short of a bar: every finish tried with the wall along the normals smoothed only as
     // elsewhere in the vessel joins in (JunctionWall::Normal: a small branch's funnel;
@@ -193,17 +312,80 @@ pub(crate) fn finish_junctions(inputs: &VolumeInputs) -> (VesselMesh, Vec<Option
     // simvascular_demo_aortoiliac at coarse, within every bar already, that wall would make a
     // finish with moved pages the best one, and its crotch inflates unevenly (CalculiX stops: a
     // fibre stretched past the exponential's range).
-    if !built[best_of(&built)].3.meets_bars() {
+    if !best_quality(&built, &composed).meets_bars() && !reserve.is_empty() {
         built.append(&mut reserve);
+        composed = compose(&built, junctions);
     }
-    let chosen = best_of(&built);
-    let (mesh, junction_of, variant, _) = built.swap_remove(chosen);
-    (mesh, junction_of, variant)
+    let chosen = composed.unwrap_or_else(|| built.swap_remove(best_of(&built)));
+    (chosen.mesh, chosen.junction_of, chosen.variants)
+}
+
+/// One element's validity (see [`validities`]).
+fn element_validity(mesh: &VesselMesh, e: usize) -> f64 {
+    let q = crate::geometry::quality::validity(&mesh.corners(e));
+    if q.is_nan() {
+        f64::NEG_INFINITY
+    } else {
+        q
+    }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::FinishQuality;
+    use super::*;
+    use crate::data::config::MeshConfig;
+    use crate::testing::straight_tube_mesh;
+
+    /// A finish of `mesh` with the given element junctions, judged.
+    fn finished(mesh: VesselMesh, junction_of: &[Option<usize>], wall: JunctionWall) -> FinishedVolume {
+        let validity = validities(&mesh, junction_of);
+        let quality = FinishQuality::of(&mesh, &validity, |e| junction_of[e].is_some());
+        let variants = vec![JunctionVariant { wall, ..Default::default() }; 2];
+        FinishedVolume { mesh, junction_of: junction_of.to_vec(), variants, validity, quality }
+    }
+
+    #[test]
+    fn each_junction_takes_its_nodes_from_the_finish_best_for_it() {
+        let tube = straight_tube_mesh(&MeshConfig::default()).unwrap().mesh;
+        let z = |e: usize| tube.corners(e).iter().map(|p| p.z).sum::<f64>() / 8.0;
+        let (lo, hi) = tube.nodes.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.z), b.max(p.z)));
+        let third = (hi - lo) / 3.0;
+        // Two "junctions" at the tube's ends, ordinary elements between them.
+        let junction_of: Vec<Option<usize>> = (0..tube.hexes.len())
+            .map(|e| match z(e) - lo {
+                d if d < third => Some(0),
+                d if d > 2.0 * third => Some(1),
+                _ => None,
+            })
+            .collect();
+        let owner = owned_nodes(&tube, &junction_of);
+        let own = |j: usize| (0..owner.len()).find(|&n| owner[n] == Some(j)).unwrap();
+        // Each finish spoils the other's junction: one node pushed across the tube.
+        let spoiled = |j: usize| {
+            let mut m = tube.clone();
+            m.nodes[own(j)].x += 40.0;
+            m
+        };
+        let (a, b) = (spoiled(1), spoiled(0));
+        let built = vec![finished(a, &junction_of, JunctionWall::Ray), finished(b, &junction_of, JunctionWall::Normal)];
+        assert!(built.iter().all(|f| f.quality.worst < 0.0), "each finish alone has an inverted element");
+        let composed = compose(&built, 2).expect("the composition is better than either finish");
+        assert!(composed.quality.worst > 0.2, "{:?}", composed.quality);
+        assert_eq!(composed.mesh.nodes, tube.nodes, "each junction kept from the finish that left it alone");
+        assert_eq!(
+            composed.variants.iter().map(|v| v.wall).collect::<Vec<_>>(),
+            [JunctionWall::Ray, JunctionWall::Normal]
+        );
+        // A node shared by a junction's element and an ordinary one is nobody's own.
+        for (hex, j) in tube.hexes.iter().zip(&junction_of) {
+            if j.is_none() {
+                assert!(hex.iter().all(|&n| owner[n as usize].is_none()));
+            }
+        }
+        // Finishes alike in every junction: nothing to compose.
+        let same = vec![finished(tube.clone(), &junction_of, JunctionWall::Ray); 2];
+        assert!(compose(&same, 2).is_none());
+    }
 
     fn finish(worst: f64, worst_wall: f64, wall_mean: f64) -> FinishQuality {
         FinishQuality { worst, worst_wall, wall_mean }

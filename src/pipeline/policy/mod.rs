@@ -11,7 +11,7 @@
 //! - **recentring close merges** ([`recentre_close_merges`]): junctions merged for being close
 //!   are centred elsewhere when their mesh is refused or short of a bar;
 //! - **finishes** ([`junction_finish`]): the volume built with several junction optimisations
-//!   and walls, the best kept;
+//!   and walls, the best kept, with each junction's own nodes from the finish best for it;
 //! - **leaving out what cannot be meshed** ([`mesh_dropping_what_fails`]): a sac found on the
 //!   surface, or a branch too short for its junction, is left out and said, the rest meshed.
 

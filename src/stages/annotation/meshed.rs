@@ -21,8 +21,8 @@ pub struct Meshed {
     pub junctions: Vec<JunctionGeometry>,
     /// The junction each element belongs to (its branch's transition), if any.
     pub junction_of: Vec<Option<usize>>,
-    /// How the junctions were finished (wall growth, surface smoothing).
-    pub junction_variant: JunctionVariant,
+    /// How each junction was finished (wall growth, surface smoothing), by junction index.
+    pub junction_variants: Vec<JunctionVariant>,
     /// Where the meshing departed from the settings, and why (a `junction_spacing` warning:
     /// the junctions spaced as at the coarse preset).
     pub notes: Vec<Warning>,
