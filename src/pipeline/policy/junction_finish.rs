@@ -282,15 +282,6 @@ fn compose(built: &[FinishedVolume], junctions: usize) -> Option<FinishedVolume>
     })
 }
 
-/// The rounds from which on a vessel whose best finish is still inverted is not finished
-/// further (it is refused, and the policies around lay it out another way). Rounds 1 and 1b
-/// smooth and slide the transitions' nodes, which untangles a crowded funnel; the later rounds
-/// (pattern search, moving pages) take a valid element further, and never turned an inverted
-/// one valid: of the 19 layouts of random trees 1-17 still inverted after round 1b, all 19 were
-/// still inverted after round 3. Each later round costs about as much as the first (a tree of 27
-/// ends laid out four ways, three of them inverted: 165 s, most of it in those rounds).
-const PAST_AN_INVERSION: usize = 2;
-
 /// The best of the finishes built and their composition.
 fn best_quality(built: &[FinishedVolume], composed: &Option<FinishedVolume>) -> FinishQuality {
     composed.as_ref().map_or(built[best_of(built)].quality, |c| c.quality)
@@ -305,11 +296,8 @@ pub(crate) fn finish_junctions(inputs: &VolumeInputs) -> (VesselMesh, Vec<Option
     let (mut built, mut reserve): (Vec<FinishedVolume>, Vec<FinishedVolume>) = (Vec::new(), Vec::new());
     let mut composed = None;
     for (k, round) in rounds(has_junctions).iter().enumerate() {
-        if k > 0 {
-            let best = best_quality(&built, &composed);
-            if best.meets_bars() || (k >= PAST_AN_INVERSION && best.worst <= 0.0) {
-                break;
-            }
+        if k > 0 && best_quality(&built, &composed).meets_bars() {
+            break;
         }
         let (normal, rest): (Vec<_>, Vec<_>) = build_round(inputs, round, &walls)
             .into_iter()
