@@ -49,30 +49,37 @@ impl FinishQuality {
     /// worst of those in the wall, the mean over the wall (summed in element order, whatever the
     /// thread count).
     fn of(mesh: &VesselMesh, validity: &[f64], judged: impl Fn(usize) -> bool) -> FinishQuality {
-        let worst = |in_wall: bool| {
-            (0..validity.len())
-                .filter(|&e| judged(e) && (!in_wall || mesh.regions[e].is_wall()))
-                .map(|e| validity[e])
-                .fold(f64::INFINITY, f64::min)
-        };
-        let wall = &validity[mesh.wall_range()];
-        let wall_mean = wall.iter().map(|q| q.max(-1.0)).sum::<f64>() / wall.len().max(1) as f64;
-        FinishQuality { worst: worst(false), worst_wall: worst(true), wall_mean }
+        let judged = (0..validity.len()).filter(|&e| judged(e));
+        FinishQuality::over(mesh, validity, judged, mesh.wall_range(), 0.0)
     }
 
     /// The figures of some elements alone (one junction's): their worst, the worst of those in
     /// the wall, and the mean over those in the wall (1 when none is).
     fn of_elements(mesh: &VesselMesh, validity: &[f64], elements: &[usize]) -> FinishQuality {
+        let in_wall = elements.iter().copied().filter(|&e| mesh.regions[e].is_wall());
+        FinishQuality::over(mesh, validity, elements.iter().copied(), in_wall, 1.0)
+    }
+
+    /// The worst validity of the elements `judged`, the worst of those in the wall, and the mean
+    /// of the `averaged` ones, each floored at -1 (summed in the order given; `empty` when there
+    /// are none).
+    fn over(
+        mesh: &VesselMesh,
+        validity: &[f64],
+        judged: impl Iterator<Item = usize> + Clone,
+        averaged: impl Iterator<Item = usize> + Clone,
+        empty: f64,
+    ) -> FinishQuality {
         let worst = |in_wall: bool| {
-            elements
-                .iter()
-                .filter(|&&e| !in_wall || mesh.regions[e].is_wall())
-                .map(|&e| validity[e])
+            judged
+                .clone()
+                .filter(|&e| !in_wall || mesh.regions[e].is_wall())
+                .map(|e| validity[e])
                 .fold(f64::INFINITY, f64::min)
         };
-        let wall: Vec<f64> = elements.iter().filter(|&&e| mesh.regions[e].is_wall()).map(|&e| validity[e]).collect();
+        let count = averaged.clone().count();
         let wall_mean =
-            if wall.is_empty() { 1.0 } else { wall.iter().map(|q| q.max(-1.0)).sum::<f64>() / wall.len() as f64 };
+            if count == 0 { empty } else { averaged.map(|e| validity[e].max(-1.0)).sum::<f64>() / count as f64 };
         FinishQuality { worst: worst(false), worst_wall: worst(true), wall_mean }
     }
 
@@ -234,6 +241,24 @@ fn compose(built: &[FinishedVolume], junctions: usize) -> Option<FinishedVolume>
             elements_of[j].push(e);
         }
     }
+    let local = |j: usize, validity: &[f64]| FinishQuality::of_elements(&base.mesh, validity, &elements_of[j]);
+    // Per junction, the first finish best for its elements, where it beats the best finish's.
+    let choices: Vec<(usize, usize, FinishQuality)> = (0..junctions)
+        .filter_map(|j| {
+            let kept = local(j, &base.validity);
+            let best = (0..built.len()).fold(None::<(usize, FinishQuality)>, |best, i| {
+                let q = local(j, &built[i].validity);
+                match best {
+                    Some((_, b)) if !q.better_than(&b) => best,
+                    _ => Some((i, q)),
+                }
+            });
+            best.filter(|(_, q)| q.better_than(&kept)).map(|(i, _)| (j, i, kept))
+        })
+        .collect();
+    if choices.is_empty() {
+        return None;
+    }
     let mut nodes_of: Vec<Vec<usize>> = vec![vec![]; junctions];
     for (n, j) in owned_nodes(&base.mesh, &base.junction_of).into_iter().enumerate() {
         if let Some(j) = j {
@@ -242,33 +267,20 @@ fn compose(built: &[FinishedVolume], junctions: usize) -> Option<FinishedVolume>
     }
     let (mut mesh, mut validity, mut variants) = (base.mesh.clone(), base.validity.clone(), base.variants.clone());
     let mut changed = false;
-    for j in 0..junctions {
-        let local = |validity: &[f64]| FinishQuality::of_elements(&base.mesh, validity, &elements_of[j]);
-        let kept = local(&base.validity);
-        let best = (0..built.len())
-            .fold(None::<(usize, FinishQuality)>, |best, i| {
-                let q = local(&built[i].validity);
-                match best {
-                    Some((_, b)) if !q.better_than(&b) => best,
-                    _ => Some((i, q)),
-                }
-            })
-            .filter(|(_, q)| q.better_than(&kept));
-        let Some((i, _)) = best else { continue };
+    for (j, i, kept) in choices {
         for &n in &nodes_of[j] {
             mesh.nodes[n] = built[i].mesh.nodes[n];
         }
         let mixed: Vec<f64> = elements_of[j].par_iter().map(|&e| element_validity(&mesh, e)).collect();
-        let mut trial = validity.clone();
-        elements_of[j].iter().zip(&mixed).for_each(|(&e, &q)| trial[e] = q);
-        if local(&trial).better_than(&kept) {
-            validity = trial;
+        elements_of[j].iter().zip(&mixed).for_each(|(&e, &q)| validity[e] = q);
+        if local(j, &validity).better_than(&kept) {
             variants[j] = built[i].variants[j];
             changed = true;
         } else {
             for &n in &nodes_of[j] {
                 mesh.nodes[n] = base.mesh.nodes[n];
             }
+            elements_of[j].iter().for_each(|&e| validity[e] = base.validity[e]);
         }
     }
     let junction_of = base.junction_of.clone();

@@ -30,7 +30,7 @@ impl PartialOrd for Entry {
 
 /// [`BallGraph::pole`] over `nodes`, given the `near` ones in increasing order (every ball
 /// that can reach the point; any superset will do): the same ball whichever superset.
-fn pole_among<'a>(nodes: &[Ball], near: impl Iterator<Item = &'a Ball> + Clone, p: &Point3<f64>, reach: f64) -> Ball {
+fn pole_among<'a>(nodes: &[Ball], near: impl Iterator<Item = &'a Ball>, p: &Point3<f64>, reach: f64) -> Ball {
     let gap = |b: &Ball| (b.centre - p).norm() - b.radius;
     let reaching = near.filter(|b| gap(b) <= reach.max(0.1 * b.radius)).max_by(|a, b| a.radius.total_cmp(&b.radius));
     reaching
