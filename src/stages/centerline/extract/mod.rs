@@ -408,7 +408,9 @@ impl EndSearch {
     fn add_rounded(&mut self) {
         let beside_open_ends = self.found.iter().any(|e| e.kind == EndKind::Open);
         let covered = paths_between(&self.graph, &self.end_nodes);
-        for node in rounded::rounded_ends(&self.graph, &covered, self.end_nodes.is_empty(), beside_open_ends) {
+        let clearance = |p: &Point3<f64>| self.lumen.closest(p).distance;
+        let start_alone = self.end_nodes.is_empty();
+        for node in rounded::rounded_ends(&self.graph, &covered, start_alone, beside_open_ends, &clearance) {
             let ball = self.graph.nodes[node as usize];
             self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Dome });
             self.end_nodes.push(node);
@@ -424,7 +426,8 @@ impl EndSearch {
         // open surface is about 1 there (its sign the triangles' facing), below a half beyond
         // an opening.
         let in_lumen = |p: &Point3<f64>| self.lumen.winding_number(p).abs() >= 0.5;
-        for node in rounded::sac_ends(&self.graph, &covered, &in_lumen) {
+        let clearance = |p: &Point3<f64>| self.lumen.closest(p).distance;
+        for node in rounded::sac_ends(&self.graph, &covered, &in_lumen, &clearance) {
             let ball = self.graph.nodes[node as usize];
             self.found.push(VesselEnd { centre: ball.centre, radius: ball.radius, kind: EndKind::Sac });
             self.end_nodes.push(node);

@@ -6,10 +6,12 @@
 //! pocket of the wall (a bulb, an ostium, a sac, a voxel step). The two differ by how far the
 //! uncovered part reaches compared with its own width: a vessel reaches several of its radii
 //! beyond the balls, a pocket about one. So, repeatedly: take the uncovered region reaching
-//! farthest in its own radii; if it is a vessel, its end is the largest ball at its far tip (the
-//! inscribed ball under the dome, VMTK's pole of the tip), and the path to it joins the tree.
+//! farthest in its own radii; if it is a vessel, its end is the ball under its tip on its axis
+//! (the inscribed ball under a dome, VMTK's pole of the tip; see [`deepest_tip_ball`]), and the
+//! path to it joins the tree.
 
 use super::medial::{BallGraph, Entry};
+use nalgebra::Point3;
 use std::collections::BinaryHeap;
 
 /// An uncovered region is a vessel when its lumen reaches at least this many of its widest
@@ -24,8 +26,9 @@ pub const VESSEL_REACH_BESIDE_OPEN_ENDS: f64 = 4.0;
 /// ... and when its end ball is at least this fraction of the covered ball it leaves from (a
 /// step of a voxel surface, or a crease, holds only tiny balls).
 const VESSEL_WIDTH: f64 = 0.25;
-/// At the far tip of a region, the end is the largest ball among those reaching within this
-/// fraction of the largest ball's radius of the farthest reach.
+/// How far a region reaches is the reach of its largest ball among those reaching within this
+/// fraction of its widest ball's radius of the farthest reach (where its end lies is
+/// [`deepest_tip_ball`]'s answer).
 const TIP_TOLERANCE: f64 = 0.25;
 /// At most this many rounded ends are looked for (a bound on the work, far above real trees).
 const MAX_ENDS: usize = 64;
@@ -36,7 +39,13 @@ const MAX_ENDS: usize = 64;
 /// With no end to start from (`start_alone`: `tree` is a single node of the lumen, not an end),
 /// the first end found (the farthest from that node) becomes the start, and the search begins
 /// again from it alone: the node may lie near another end, whose tip it would hide.
-pub fn rounded_ends(graph: &BallGraph, tree: &[u32], start_alone: bool, beside_open_ends: bool) -> Vec<u32> {
+pub fn rounded_ends(
+    graph: &BallGraph,
+    tree: &[u32],
+    start_alone: bool,
+    beside_open_ends: bool,
+    clearance: Clearance,
+) -> Vec<u32> {
     let reach = if beside_open_ends { VESSEL_REACH_BESIDE_OPEN_ENDS } else { VESSEL_REACH };
     let n = graph.nodes.len();
     let mut in_tree = vec![false; n];
@@ -44,7 +53,7 @@ pub fn rounded_ends(graph: &BallGraph, tree: &[u32], start_alone: bool, beside_o
     let mut ends = vec![];
     while ends.len() < MAX_ENDS {
         let gap = gaps(graph, &in_tree);
-        let Some((end, path)) = farthest_uncovered(graph, &gap, reach) else { break };
+        let Some((end, path)) = farthest_uncovered(graph, &gap, reach, clearance) else { break };
         if start_alone && ends.is_empty() {
             in_tree.iter_mut().for_each(|t| *t = false);
             in_tree[end as usize] = true;
@@ -95,7 +104,7 @@ fn gaps(graph: &BallGraph, in_tree: &[bool]) -> Vec<f64> {
 
 /// A part of the lumen the tree's balls leave uncovered, judged by its far tip.
 struct Pocket {
-    /// The largest ball at the far tip (see [`TIP_TOLERANCE`]).
+    /// The ball under the far tip (see [`deepest_tip_ball`]).
     end: u32,
     /// How far the pocket's lumen reaches beyond the covered lumen (mm).
     tip: f64,
@@ -117,7 +126,7 @@ impl Pocket {
 
 /// Every uncovered part of the lumen next to the covered one (`gap`, see [`gaps`]), in order of
 /// its first node.
-fn pockets(graph: &BallGraph, gap: &[f64]) -> Vec<Pocket> {
+fn pockets(graph: &BallGraph, gap: &[f64], clearance: Clearance) -> Vec<Pocket> {
     let n = graph.nodes.len();
     let covered: Vec<bool> = gap.iter().map(|&g| g < 0.0).collect();
     // Distance along the lumen from the covered lumen (the union of the tree's balls): a node
@@ -170,28 +179,79 @@ fn pockets(graph: &BallGraph, gap: &[f64]) -> Vec<Pocket> {
         .filter_map(|region| {
             let tip = region.iter().map(|&v| reach(v)).fold(f64::NEG_INFINITY, f64::max);
             let widest = region.iter().map(|&v| graph.nodes[v].radius).fold(0.0, f64::max);
-            let end = region
+            // How far the pocket reaches, as the thresholds above were measured: the reach of
+            // the largest ball reaching within a quarter of the widest radius of the tip.
+            let reached = region
                 .iter()
                 .copied()
                 .filter(|&v| reach(v) >= tip - TIP_TOLERANCE * widest)
-                .max_by(|&a, &b| graph.nodes[a].radius.total_cmp(&graph.nodes[b].radius).then(b.cmp(&a)))?;
-            Some(Pocket { end: end as u32, tip: reach(end), widest, root: root[end], path: path_to(end) })
+                .max_by(|&a, &b| graph.nodes[a].radius.total_cmp(&graph.nodes[b].radius).then(b.cmp(&a)))
+                .map(reach)?;
+            let end = deepest_tip_ball(graph, &region, &dist, clearance)?;
+            Some(Pocket { end: end as u32, tip: reached, widest, root: root[end], path: path_to(end) })
         })
         .collect()
+}
+
+/// How far a point lies from the lumen surface (mm).
+pub type Clearance<'a> = &'a dyn Fn(&Point3<f64>) -> f64;
+
+/// The end ball of an uncovered region: the ball whose distance along the lumen from the
+/// covered lumen (`dist`) plus twice its radius is greatest, its radius taken no larger than
+/// its centre's clearance from the surface (the first of equals).
+///
+/// The farthest-reaching ball alone is not the tip. Under a blunt end, a flat face meeting the
+/// side in rounded corners, the balls in the corners reach farther than the tube's ball against
+/// the face, by up to sqrt(2) - 1 of the tube's radius for a square corner (their path turns off
+/// the axis), and which corner the farthest lies in is the triangulation's whim: the abdominal
+/// aorta segment written as polygons in place of triangles moved its end 12 mm across a face
+/// 20 mm wide. Counting each ball's radius once more outweighs that excess, so the tube's ball
+/// wins, on the axis whatever the corners; on a dome every ball under the tip reaches as far,
+/// and the dome's centre ball, the largest, wins; a tube narrowing to its tip by less than a
+/// radius per two radii of length keeps its end at the tip. A face sampled sparsely (a
+/// decimated surface's end face, a few large triangles) leaves balls whose spheres cross it;
+/// their clearance, not their radius, is what they hold.
+fn deepest_tip_ball(graph: &BallGraph, region: &[usize], dist: &[f64], clearance: Clearance) -> Option<usize> {
+    let depth = |v: usize, r: f64| dist[v] + 2.0 * r;
+    // The radius bounds the clearance, so balls are visited deepest first by their radii and
+    // the search stops once none left can beat the best found.
+    let mut order: Vec<usize> = region.to_vec();
+    order.sort_by(|&a, &b| depth(b, graph.nodes[b].radius).total_cmp(&depth(a, graph.nodes[a].radius)).then(a.cmp(&b)));
+    let mut best: Option<(f64, usize)> = None;
+    for v in order {
+        let ball = graph.nodes[v];
+        if best.is_some_and(|(d, _)| depth(v, ball.radius) < d) {
+            break;
+        }
+        let d = depth(v, ball.radius.min(clearance(&ball.centre)));
+        if best.is_none_or(|(b, u)| d > b || (d == b && v < u)) {
+            best = Some((d, v));
+        }
+    }
+    best.map(|(_, v)| v)
 }
 
 /// The most far-reaching uncovered vessel: its end node and the path from the covered lumen to
 /// it, or `None` when every uncovered region is a pocket (reaching less than `vessel_reach` of
 /// its widest radius, see [`VESSEL_REACH`]).
-fn farthest_uncovered(graph: &BallGraph, gap: &[f64], vessel_reach: f64) -> Option<(u32, Vec<u32>)> {
+fn farthest_uncovered(
+    graph: &BallGraph,
+    gap: &[f64],
+    vessel_reach: f64,
+    clearance: Clearance,
+) -> Option<(u32, Vec<u32>)> {
     let is_vessel = |p: &Pocket| {
         let (r, from) = (graph.nodes[p.end as usize].radius, graph.nodes[p.root as usize].radius);
         p.significance() >= vessel_reach && r >= VESSEL_WIDTH * from
     };
-    let best = pockets(graph, gap).into_iter().filter(is_vessel).fold(None, |best: Option<Pocket>, p| match best {
-        Some(b) if b.significance() >= p.significance() => Some(b),
-        _ => Some(p),
-    })?;
+    let best =
+        pockets(graph, gap, clearance).into_iter().filter(is_vessel).fold(
+            None,
+            |best: Option<Pocket>, p| match best {
+                Some(b) if b.significance() >= p.significance() => Some(b),
+                _ => Some(p),
+            },
+        )?;
     Some((best.end, best.path))
 }
 
@@ -230,7 +290,7 @@ fn regions(graph: &BallGraph, covered: &[bool], dist: &[f64]) -> Vec<Vec<usize>>
 pub const SAC_REACH: f64 = 2.5;
 
 /// The far ends of the saccular aneurysms beside the tree (`tree`: the nodes of the centerlines
-/// to every end), each the largest ball under its dome: pockets too short for a vessel (see
+/// to every end), each the ball under its dome (see [`deepest_tip_ball`]): pockets too short for a vessel (see
 /// [`VESSEL_REACH`]) but reaching far beyond the vessel they open from (see [`SAC_REACH`]),
 /// whose end ball's centre lies in the lumen (`in_lumen`).
 /// Farthest-reaching first; each sac's path joins the tree before the next is looked for.
@@ -242,7 +302,12 @@ pub const SAC_REACH: f64 = 2.5;
 /// section centred beyond the cut (random tree 3: a ball of 4.2 mm, 3.4 mm past an open end of
 /// radius 2.2 mm, taken for a sac reaching 2.5 vessel radii). No part of the lumen lies there,
 /// let alone a sac, whatever the shape of the vessel.
-pub fn sac_ends(graph: &BallGraph, tree: &[u32], in_lumen: &dyn Fn(&nalgebra::Point3<f64>) -> bool) -> Vec<u32> {
+pub fn sac_ends(
+    graph: &BallGraph,
+    tree: &[u32],
+    in_lumen: &dyn Fn(&Point3<f64>) -> bool,
+    clearance: Clearance,
+) -> Vec<u32> {
     let mut in_tree = vec![false; graph.nodes.len()];
     let mut members = tree.to_vec();
     tree.iter().for_each(|&t| in_tree[t as usize] = true);
@@ -262,7 +327,7 @@ pub fn sac_ends(graph: &BallGraph, tree: &[u32], in_lumen: &dyn Fn(&nalgebra::Po
     while ends.len() < MAX_ENDS {
         let gap = gaps(graph, &in_tree);
         let reach_in_vessel_radii = |p: &Pocket| vessel_radius(&members, p.root).map_or(0.0, |r| p.tip / r);
-        let sac = pockets(graph, &gap)
+        let sac = pockets(graph, &gap, clearance)
             .into_iter()
             .map(|p| (reach_in_vessel_radii(&p), p))
             .filter(|(reach, p)| {
