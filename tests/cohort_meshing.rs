@@ -65,10 +65,10 @@ const SAC_JUNCTIONS: [&str; 2] = ["palabos_cerebral_aneurysm", "openlb_cerebral_
 
 /// The cases whose mesh stops well short of a vessel end, said by an `end_cut_short` warning:
 /// none since sections may meet a wall leaning up to 40 degrees into a dome (the voxel aorta's
-/// outlet dome was left 50 mm short), but the pulmonary bifurcation's blunt end since its
-/// surface is wound and numbered canonically (issue 45: the end found on its blunt face moved
-/// with the medial axis's samples), every bar held.
-const ENDS_CUT_SHORT: [&str; 1] = ["sphinxsys_pulmonary_bifurcation"];
+/// outlet dome was left 50 mm short), and none again since a rounded end is found on its axis
+/// (the pulmonary bifurcation's blunt end, found in a corner of its face once its surface was
+/// wound and numbered canonically, was left short).
+const ENDS_CUT_SHORT: [&str; 0] = [];
 
 /// The cases with a branch too short for its junction's transition, meshed with its
 /// neighbour's lumen and its end opened in the side of the mesh, said by a `side_end` warning
