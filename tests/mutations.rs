@@ -17,13 +17,16 @@ use vesselhex::testing::suite::{header, mesh, row, verdict};
 
 /// The sample run in CI: (case, mutations). Every mutation kind appears at least once; the
 /// cases are small, and differ: a capped aorto-iliac (flat caps, a stub opened in the side), a
-/// pulmonary bifurcation (blunt rounded ends, 1,150 mm from the origin), the carotid (three open
-/// ends, in metres) and a stenosed coronary (two flat caps).
+/// pulmonary bifurcation (blunt rounded ends, 1,150 mm from the origin; rotated and written in
+/// metres, its ends were found in whichever corner of their faces until a rounded end was found
+/// on its axis), the carotid (three open ends, in metres) and a stenosed coronary (two flat caps,
+/// split into files and into a folder: the pulmonary bifurcation split so fails, its trunk of
+/// 16.2 mm short of the 21.5 its junction's transition needs, as the full suite lists).
 const SAMPLE: [(&str, &[Mutation]); 4] = [
     ("openlb_aortoiliac_capped", &[Mutation::AsGiven, Mutation::FlipPatches, Mutation::Reversed, Mutation::Unwelded]),
     (
         "sphinxsys_pulmonary_bifurcation",
-        &[Mutation::AsGiven, Mutation::UnreferencedPoints, Mutation::SplitFolder, Mutation::StlAscii],
+        &[Mutation::AsGiven, Mutation::UnreferencedPoints, Mutation::RotatedMetres, Mutation::StlAscii],
     ),
     (
         "gmsh_carotid_bifurcation",
@@ -44,8 +47,8 @@ const SAMPLE: [(&str, &[Mutation]); 4] = [
             Mutation::Decimated,
             Mutation::StlBinary,
             Mutation::SplitFiles,
+            Mutation::SplitFolder,
             Mutation::Subdivided,
-            Mutation::RotatedMetres,
         ],
     ),
 ];
