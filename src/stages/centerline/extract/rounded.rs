@@ -244,14 +244,11 @@ fn farthest_uncovered(
         let (r, from) = (graph.nodes[p.end as usize].radius, graph.nodes[p.root as usize].radius);
         p.significance() >= vessel_reach && r >= VESSEL_WIDTH * from
     };
-    let best =
-        pockets(graph, gap, clearance).into_iter().filter(is_vessel).fold(
-            None,
-            |best: Option<Pocket>, p| match best {
-                Some(b) if b.significance() >= p.significance() => Some(b),
-                _ => Some(p),
-            },
-        )?;
+    let vessels = pockets(graph, gap, clearance).into_iter().filter(is_vessel);
+    let best = vessels.fold(None, |best: Option<Pocket>, p| match best {
+        Some(b) if b.significance() >= p.significance() => Some(b),
+        _ => Some(p),
+    })?;
     Some((best.end, best.path))
 }
 
@@ -290,9 +287,9 @@ fn regions(graph: &BallGraph, covered: &[bool], dist: &[f64]) -> Vec<Vec<usize>>
 pub const SAC_REACH: f64 = 2.5;
 
 /// The far ends of the saccular aneurysms beside the tree (`tree`: the nodes of the centerlines
-/// to every end), each the ball under its dome (see [`deepest_tip_ball`]): pockets too short for a vessel (see
-/// [`VESSEL_REACH`]) but reaching far beyond the vessel they open from (see [`SAC_REACH`]),
-/// whose end ball's centre lies in the lumen (`in_lumen`).
+/// to every end), each the ball under its dome (see [`deepest_tip_ball`]): pockets too short
+/// for a vessel (see [`VESSEL_REACH`]) but reaching far beyond the vessel they open from (see
+/// [`SAC_REACH`]), whose end ball's centre lies in the lumen (`in_lumen`).
 /// Farthest-reaching first; each sac's path joins the tree before the next is looked for.
 ///
 /// The medial graph holds balls outside the lumen too, beyond its open ends: the fan closing an
