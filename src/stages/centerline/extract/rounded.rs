@@ -213,22 +213,20 @@ pub type Clearance<'a> = &'a dyn Fn(&Point3<f64>) -> f64;
 /// their clearance, not their radius, is what they hold.
 fn deepest_tip_ball(graph: &BallGraph, region: &[usize], dist: &[f64], clearance: Clearance) -> Option<usize> {
     let depth = |v: usize, r: f64| dist[v] + 2.0 * r;
-    // The radius bounds the clearance, so balls are visited deepest first by their radii and
-    // the search stops once none left can beat the best found.
-    let mut order: Vec<usize> = region.to_vec();
-    order.sort_by(|&a, &b| depth(b, graph.nodes[b].radius).total_cmp(&depth(a, graph.nodes[a].radius)).then(a.cmp(&b)));
-    let mut best: Option<(f64, usize)> = None;
-    for v in order {
-        let ball = graph.nodes[v];
-        if best.is_some_and(|(d, _)| depth(v, ball.radius) < d) {
-            break;
-        }
-        let d = depth(v, ball.radius.min(clearance(&ball.centre)));
-        if best.is_none_or(|(b, u)| d > b || (d == b && v < u)) {
-            best = Some((d, v));
-        }
-    }
-    best.map(|(_, v)| v)
+    let bound = |v: usize| depth(v, graph.nodes[v].radius);
+    let held = |v: usize| depth(v, graph.nodes[v].radius.min(clearance(&graph.nodes[v].centre)));
+    // The radius bounds the clearance: the ball deepest by its radius sets a floor (its depth by
+    // what it holds), and only balls deeper than that by their radii may beat it, so only
+    // theirs are measured (a few at a tip, not the region).
+    let top = region.iter().copied().max_by(|&a, &b| bound(a).total_cmp(&bound(b)).then(b.cmp(&a)))?;
+    let floor = held(top);
+    region
+        .iter()
+        .copied()
+        .filter(|&v| bound(v) >= floor)
+        .map(|v| (held(v), v))
+        .max_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)))
+        .map(|(_, v)| v)
 }
 
 /// The most far-reaching uncovered vessel: its end node and the path from the covered lumen to
