@@ -1,7 +1,8 @@
-//! Bridges that bow out of the straight line between their junctions, meshed from the bare
-//! surface: a branch between two junctions too close for ordinary sections is swept from fold to
-//! fold, and where the straight sweep leaves the lumen it is carried along the branch's own
-//! centerline.
+//! Bridges that bow out of the straight line between their junctions or bend within it, meshed
+//! from the bare surface: a branch between two junctions too close for ordinary sections is
+//! swept straight from fold to fold; where that sweep misses the wall, on whichever folds least
+//! of the same carried onto the branch's own centerline and the two folds carried along it and
+//! blended.
 
 mod common;
 
@@ -52,5 +53,40 @@ fn a_bridge_bowing_out_of_its_chord_follows_its_centerline() {
             }
         }
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Random tree 23 (12 ends): a branch 21 mm long between two junctions turns 116 degrees in its
+/// middle (a hairpin on a radius of curvature of about 1.5 vessel radii), so no section near
+/// either junction is followed by a clear run and the branch is a bridge. Its straight sweep
+/// misses the wall, and the sweep moved onto the centerline lays its middle sections along the
+/// bend: the tree was refused, its lumen inverted there. Each fold carried along the
+/// centerline in the branch's frames and blended from one to the other keeps the sections
+/// across the vessel: the tree meshes with every end and every bar held.
+#[test]
+fn a_bridge_around_a_hairpin_carries_its_folds_along_its_centerline() {
+    let seed = 23;
+    let dir = temp_dir(&format!("bridge-{seed}"));
+    let written = write_random_tree(seed, &dir, SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
+    let truth = serde_json::to_value(written.tree.manifest("", "")).unwrap();
+    let surface = vesselhex::input::read_surface(&written.surface, vesselhex::units::LengthUnit::Mm).unwrap();
+    let vessel = mesh_surface(
+        surface,
+        CenterlineSource::Extract(ExtractOptions::default()),
+        common::coarse_settings(),
+        &mut Progress::new(true, 0),
+    )
+    .unwrap_or_else(|e| panic!("tree {seed}: {e}"));
+    let mesh = &vessel.meshed.mesh;
+    assert_eq!(mesh.ends.len(), truth["ends"].as_array().unwrap().len(), "tree {seed}: ends");
+    let min_sj = mesh.quality.iter().map(|q| q.scaled_jacobian).fold(f64::INFINITY, f64::min);
+    assert!(min_sj >= 0.2, "tree {seed}: min scaled Jacobian {min_sj}");
+    let bridges = vessel
+        .meshed
+        .projected
+        .iter()
+        .filter(|p| matches!((&p.start, &p.end), (BranchEnd::Fold(_), BranchEnd::Fold(_))) && p.s_start == p.s_end)
+        .count();
+    assert!(bridges > 0, "tree {seed}: no bridge");
     let _ = std::fs::remove_dir_all(&dir);
 }
