@@ -81,6 +81,11 @@ fn a_bridge_around_a_hairpin_carries_its_folds_along_its_centerline() {
     assert_eq!(mesh.ends.len(), truth["ends"].as_array().unwrap().len(), "tree {seed}: ends");
     let min_sj = mesh.quality.iter().map(|q| q.scaled_jacobian).fold(f64::INFINITY, f64::min);
     assert!(min_sj >= 0.2, "tree {seed}: min scaled Jacobian {min_sj}");
+    let (wall, lumen) = (mesh.wall_range(), mesh.lumen_range());
+    let wall_mean = wall.clone().map(|e| mesh.quality[e].scaled_jacobian).sum::<f64>() / wall.len() as f64;
+    assert!(wall_mean >= 0.85, "tree {seed}: wall mean scaled Jacobian {wall_mean}");
+    let skew = lumen.clone().map(|e| mesh.quality[e].equiangle_skew).sum::<f64>() / lumen.len() as f64;
+    assert!(skew <= 0.35, "tree {seed}: lumen mean equi-angle skew {skew}");
     let bridges = vessel
         .meshed
         .projected
