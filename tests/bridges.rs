@@ -6,12 +6,17 @@
 
 mod common;
 
-use common::temp_dir;
-use vesselhex::centerline_extract::ExtractOptions;
-use vesselhex::pipeline::{mesh_surface, CenterlineSource};
-use vesselhex::progress::Progress;
-use vesselhex::projection::BranchEnd;
-use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
+use vesselhex::pipeline::Meshed;
+use vesselhex::projection::{BranchEnd, ProjectedBranch};
+
+/// The meshed branches swept from fold to fold, with no ordinary section.
+fn bridges(meshed: &Meshed) -> Vec<&ProjectedBranch> {
+    meshed
+        .projected
+        .iter()
+        .filter(|p| matches!((&p.start, &p.end), (BranchEnd::Fold(_), BranchEnd::Fold(_))) && p.s_start == p.s_end)
+        .collect()
+}
 
 /// Random tree 32 (9 ends): its bridge between two junctions (54 mm of centerline between
 /// centres 42 mm apart, radii 9.2 and 4.3 mm) bows out of the chord between them, and its
@@ -20,30 +25,12 @@ use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
 /// lumen node lies inside or on the lumen surface.
 #[test]
 fn a_bridge_bowing_out_of_its_chord_follows_its_centerline() {
-    let seed = 32;
-    let dir = temp_dir(&format!("bridge-{seed}"));
-    let written = write_random_tree(seed, &dir, SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
-    let truth = serde_json::to_value(written.tree.manifest("", "")).unwrap();
-    let surface = vesselhex::input::read_surface(&written.surface, vesselhex::units::LengthUnit::Mm).unwrap();
-    let vessel = mesh_surface(
-        surface.clone(),
-        CenterlineSource::Extract(ExtractOptions::default()),
-        common::coarse_settings(),
-        &mut Progress::new(true, 0),
-    )
-    .unwrap_or_else(|e| panic!("tree {seed}: {e}"));
-    let meshed = &vessel.meshed;
-    let mesh = &meshed.mesh;
-    assert_eq!(mesh.ends.len(), truth["ends"].as_array().unwrap().len(), "tree {seed}: ends");
-    let min_sj = mesh.quality.iter().map(|q| q.scaled_jacobian).fold(f64::INFINITY, f64::min);
-    assert!(min_sj >= 0.2, "tree {seed}: min scaled Jacobian {min_sj}");
-    let bridges: Vec<_> = meshed
-        .projected
-        .iter()
-        .filter(|p| matches!((&p.start, &p.end), (BranchEnd::Fold(_), BranchEnd::Fold(_))) && p.s_start == p.s_end)
-        .collect();
+    let tree = common::mesh_random_tree(32, "bridge");
+    tree.assert_every_end_and_min_sj();
+    let (seed, meshed) = (tree.seed, &tree.vessel.meshed);
+    let bridges = bridges(meshed);
     assert!(!bridges.is_empty(), "tree {seed}: no bridge");
-    let lumen = vesselhex::surface::LumenSurface::new(&surface).unwrap();
+    let lumen = vesselhex::surface::LumenSurface::new(&tree.surface).unwrap();
     for bridge in bridges {
         assert!(bridge.sections.len() >= 4, "tree {seed}: a bridge of {} sections", bridge.sections.len());
         for section in &bridge.sections {
@@ -53,7 +40,7 @@ fn a_bridge_bowing_out_of_its_chord_follows_its_centerline() {
             }
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&tree.dir);
 }
 
 /// Random tree 23 (12 ends): a branch 21 mm long between two junctions turns 116 degrees in its
@@ -65,33 +52,14 @@ fn a_bridge_bowing_out_of_its_chord_follows_its_centerline() {
 /// across the vessel: the tree meshes with every end and every bar held.
 #[test]
 fn a_bridge_around_a_hairpin_carries_its_folds_along_its_centerline() {
-    let seed = 23;
-    let dir = temp_dir(&format!("bridge-{seed}"));
-    let written = write_random_tree(seed, &dir, SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
-    let truth = serde_json::to_value(written.tree.manifest("", "")).unwrap();
-    let surface = vesselhex::input::read_surface(&written.surface, vesselhex::units::LengthUnit::Mm).unwrap();
-    let vessel = mesh_surface(
-        surface,
-        CenterlineSource::Extract(ExtractOptions::default()),
-        common::coarse_settings(),
-        &mut Progress::new(true, 0),
-    )
-    .unwrap_or_else(|e| panic!("tree {seed}: {e}"));
-    let mesh = &vessel.meshed.mesh;
-    assert_eq!(mesh.ends.len(), truth["ends"].as_array().unwrap().len(), "tree {seed}: ends");
-    let min_sj = mesh.quality.iter().map(|q| q.scaled_jacobian).fold(f64::INFINITY, f64::min);
-    assert!(min_sj >= 0.2, "tree {seed}: min scaled Jacobian {min_sj}");
+    let tree = common::mesh_random_tree(23, "bridge");
+    tree.assert_every_end_and_min_sj();
+    let (seed, mesh) = (tree.seed, &tree.vessel.meshed.mesh);
     let (wall, lumen) = (mesh.wall_range(), mesh.lumen_range());
     let wall_mean = wall.clone().map(|e| mesh.quality[e].scaled_jacobian).sum::<f64>() / wall.len() as f64;
     assert!(wall_mean >= 0.85, "tree {seed}: wall mean scaled Jacobian {wall_mean}");
     let skew = lumen.clone().map(|e| mesh.quality[e].equiangle_skew).sum::<f64>() / lumen.len() as f64;
     assert!(skew <= 0.35, "tree {seed}: lumen mean equi-angle skew {skew}");
-    let bridges = vessel
-        .meshed
-        .projected
-        .iter()
-        .filter(|p| matches!((&p.start, &p.end), (BranchEnd::Fold(_), BranchEnd::Fold(_))) && p.s_start == p.s_end)
-        .count();
-    assert!(bridges > 0, "tree {seed}: no bridge");
-    let _ = std::fs::remove_dir_all(&dir);
+    assert!(!bridges(&tree.vessel.meshed).is_empty(), "tree {seed}: no bridge");
+    let _ = std::fs::remove_dir_all(&tree.dir);
 }

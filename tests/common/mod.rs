@@ -610,3 +610,44 @@ pub fn assert_same_files(cli: &Path, lib: &Path, names: &[&str]) {
         assert!(std::fs::read(cli.join(name)).unwrap() == std::fs::read(lib.join(name)).unwrap(), "{name} differs");
     }
 }
+
+/// A generated tree written into a folder of its own and meshed from its bare surface as
+/// `vesselhex mesh --preset coarse` meshes it: the folder, the tree's truth, its surface and
+/// the meshed vessel.
+pub struct MeshedTree {
+    pub seed: u64,
+    pub dir: PathBuf,
+    pub truth: serde_json::Value,
+    pub surface: TriangleSurface,
+    pub vessel: vesselhex::pipeline::MeshedVessel,
+}
+
+/// Writes random tree `seed` into a temporary folder named after `tag` and meshes it from its
+/// bare surface at coarse; a refusal fails the test, naming the tree.
+pub fn mesh_random_tree(seed: u64, tag: &str) -> MeshedTree {
+    use vesselhex::synthetic_tree::{write_random_tree, SurfaceFormat};
+    let dir = temp_dir(&format!("{tag}-{seed}"));
+    let written = write_random_tree(seed, &dir, SurfaceFormat::Stl, &mut Progress::new(true, 0)).unwrap();
+    let truth = serde_json::to_value(written.tree.manifest("", "")).unwrap();
+    let surface = read_surface(&written.surface, LengthUnit::Mm).unwrap();
+    let vessel = vesselhex::pipeline::mesh_surface(
+        surface.clone(),
+        vesselhex::pipeline::CenterlineSource::Extract(vesselhex::centerline_extract::ExtractOptions::default()),
+        coarse_settings(),
+        &mut Progress::new(true, 0),
+    )
+    .unwrap_or_else(|e| panic!("tree {seed}: {e}"));
+    MeshedTree { seed, dir, truth, surface, vessel }
+}
+
+impl MeshedTree {
+    /// Asserts the mesh has every true end and no element below the minimum scaled Jacobian bar
+    /// (0.2); gives that minimum.
+    pub fn assert_every_end_and_min_sj(&self) -> f64 {
+        let (seed, mesh) = (self.seed, &self.vessel.meshed.mesh);
+        assert_eq!(mesh.ends.len(), self.truth["ends"].as_array().unwrap().len(), "tree {seed}: ends");
+        let min_sj = mesh.quality.iter().map(|q| q.scaled_jacobian).fold(f64::INFINITY, f64::min);
+        assert!(min_sj >= 0.2, "tree {seed}: min scaled Jacobian {min_sj}");
+        min_sj
+    }
+}
