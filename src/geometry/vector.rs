@@ -1,6 +1,12 @@
-//! Small vector helpers shared by the geometry and the stages.
+//! Small vector and interpolation helpers shared by the geometry and the stages.
 
 use nalgebra::Vector3;
+
+/// Smooth step from 0 to 1 over [0, 1] (zero slope at both ends), 0 before and 1 after.
+pub fn smoothstep(x: f64) -> f64 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
 
 /// A deterministic unit vector perpendicular to `t`: the projection of the world axis least
 /// aligned with it.

@@ -29,6 +29,7 @@ use crate::data::config::{ExtensionShape, ExtensionsConfig};
 use crate::data::error::{Error, Result};
 use crate::geometry::mesh::{sets, ElementFace, Hex, Region, VesselEnd, VesselMesh, FACE_DOWNSTREAM, FACE_OUTER};
 use crate::geometry::quality::{element_quality, Stats};
+use crate::geometry::vector::smoothstep;
 use crate::stages::annotation::annotate::element_triad;
 use nalgebra::{Point3, Vector2, Vector3};
 use serde::Serialize;
@@ -234,12 +235,6 @@ impl EndSection {
         }
         q * (self.radius / self.boundary_distance(q))
     }
-}
-
-/// Smooth step from 0 to 1 over [0, 1] (zero slope at both ends).
-fn smoothstep(x: f64) -> f64 {
-    let x = x.clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
 }
 
 /// The extension's sets gathered over every end: its wall's nodes and faces.

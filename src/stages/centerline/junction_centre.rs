@@ -10,6 +10,7 @@
 
 use super::rooted::RootedTree;
 use crate::geometry::surface::LumenSurface;
+use crate::geometry::vector::smoothstep;
 use nalgebra::{Point3, Vector3};
 
 /// The centre moves only when the ball it finds is this much larger than the file's centre's.
@@ -102,8 +103,7 @@ pub(super) fn bend_end(
         if s >= blend || k == n - 1 {
             break;
         }
-        let x = 1.0 - s / blend;
-        let w = x * x * (3.0 - 2.0 * x);
+        let w = smoothstep(1.0 - s / blend);
         points[i] += shift * w;
         radii[i] += (radius - end_radius) * w;
     }

@@ -11,6 +11,7 @@
 //! beside its junction.
 
 use crate::geometry::surface::LumenSurface;
+use crate::geometry::vector::smoothstep;
 use crate::stages::centerline::{Branch, Frame};
 use nalgebra::{Point3, Vector3};
 
@@ -124,9 +125,8 @@ pub fn turn_to_caps(branch: &mut Branch, surface: &LumenSurface, radius: f64) ->
             if from_end >= reach {
                 continue;
             }
-            // Smoothstep: the cap's plane at the end, square at `reach`, no kink at either.
-            let x = from_end / reach;
-            let w = 1.0 - x * x * (3.0 - 2.0 * x);
+            // The cap's plane at the end, square at `reach`, no kink at either.
+            let w = 1.0 - smoothstep(from_end / reach);
             let downstream = if at_start { -normal } else { normal };
             sample.frame =
                 Frame::from_tangent_and_hint(sample.frame.tangent * (1.0 - w) + downstream * w, sample.frame.normal);

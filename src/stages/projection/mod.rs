@@ -11,6 +11,7 @@
 
 use crate::data::error::{Error, Result};
 use crate::geometry::surface::LumenSurface;
+use crate::geometry::vector::smoothstep;
 use crate::stages::centerline::{Branch, CenterlineSample};
 use crate::stages::junction::blocks::SectionTemplate;
 use crate::stages::junction::{transition_points, FoldEnd, JunctionGeometry, TransitionPoints};
@@ -1249,11 +1250,6 @@ fn carried_blend(
         base + frame_matrix(along) * frame_matrix(from).transpose() * (q - anchor)
     };
     Point3::from(carry(first).coords * (1.0 - h) + carry(second).coords * h)
-}
-
-/// 0 at 0 and 1 at 1, level at both.
-fn smoothstep(u: f64) -> f64 {
-    u * u * (3.0 - 2.0 * u)
 }
 
 /// A sample's frame as the rotation from the world's axes to its normal, binormal and tangent.
