@@ -833,6 +833,18 @@ pub fn clear_transition_length(
         }
         d -= step;
     }
+    // Still none: a stub's transition in fact runs from its end's own section (see
+    // `project_branch`), past `reach`; the fold need lie ahead of that one only.
+    let end_trim = if at_start { setup.trim_outlet } else { setup.trim_inlet };
+    let end_section = len - end_trim * at(len).radius;
+    if setup.steep_short_branches
+        && estimate > reach
+        && !sac
+        && fold_clearance(end_section) >= FOLD_MARGIN * r
+        && clear(reach, MAX_BEND)
+    {
+        return Ok(Some(reach));
+    }
     // A bend tighter than the gentle one just past the junction, and the fold behind the
     // sections beyond it (a branch curling back): the bend that stops sections crossing inside
     // the lumen will do, and the elements decide.
