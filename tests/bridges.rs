@@ -2,7 +2,8 @@
 //! from the bare surface: a branch between two junctions too close for ordinary sections is
 //! swept straight from fold to fold; where that sweep misses the wall, on whichever folds least
 //! of the same carried onto the branch's own centerline and the two folds carried along it and
-//! blended.
+//! blended. A branch with too little room between its two transitions for ordinary sections is
+//! a bridge.
 
 mod common;
 
@@ -61,5 +62,24 @@ fn a_bridge_around_a_hairpin_carries_its_folds_along_its_centerline() {
     let skew = lumen.clone().map(|e| mesh.quality[e].equiangle_skew).sum::<f64>() / lumen.len() as f64;
     assert!(skew <= 0.35, "tree {seed}: lumen mean equi-angle skew {skew}");
     assert!(!bridges(&tree.vessel.meshed).is_empty(), "tree {seed}: no bridge");
+    let _ = std::fs::remove_dir_all(&tree.dir);
+}
+
+/// Random tree 66 (4 capped ends): branch_1 runs 8.4 mm between two junctions, their
+/// transitions leaving 1.3 mm between them for a vessel of radius 2.4 mm. That was more room
+/// than made a bridge (a quarter of the two end radii) and less than ordinary sections were
+/// meshed in (half of them): neither, the tree was refused as "too short to mesh". One least
+/// stretch holds for both: the branch is a bridge, and the tree meshes with every end.
+#[test]
+fn a_branch_too_short_for_ordinary_sections_between_two_transitions_is_a_bridge() {
+    let tree = common::mesh_random_tree(66, "bridge");
+    tree.assert_every_end_and_min_sj();
+    let seed = tree.seed;
+    let bridges = bridges(&tree.vessel.meshed);
+    let tree_branches = &tree.vessel.meshed.tree.branches;
+    assert!(
+        bridges.iter().any(|b| tree_branches[b.branch].name == "branch_1"),
+        "tree {seed}: branch_1 is not a bridge"
+    );
     let _ = std::fs::remove_dir_all(&tree.dir);
 }

@@ -25,6 +25,13 @@ pub mod end_planes;
 pub mod plan;
 pub use dome::DomeTop;
 
+/// Least stretch of ordinary sections a branch is meshed with, in end radii (the sum of the
+/// stretch's two end radii: half of it is one mean radius). Between two junctions' transitions,
+/// less and the branch is a bridge; [`project_branch`] holds every stretch to the same, so no
+/// branch falls between the two (random trees 47 and 66: 1.0 and 1.3 mm between transitions,
+/// for radii of 2.4 mm, were above the bridges' old 0.25 and below the sections' 0.5: refused
+/// as too short to mesh).
+pub const MIN_ORDINARY_STRETCH: f64 = 0.5;
 /// Hit triangles whose normal is within this cosine of the axis mark a cap (about 70 degrees
 /// from the wall direction of a tube) ...
 const CAP_NORMAL_COS: f64 = 0.35;
@@ -388,7 +395,7 @@ pub fn project_branch(
     // or two from the axis (random tree 3: 3.2 mm out of a vessel of 1.2 mm), leaves no room for
     // the margin past its junction's transition, so its last section stands at the ball's centre.
     let s_end = match end_junction {
-        None if setup.dome_end && s_end - s_start < 0.5 * (r0 + r1) => samples[i1].s,
+        None if setup.dome_end && s_end - s_start < MIN_ORDINARY_STRETCH * (r0 + r1) => samples[i1].s,
         _ => s_end,
     };
     // Between the ends, a section that does not close from the centerline may from inside the
@@ -412,8 +419,8 @@ pub fn project_branch(
     // clipped obliquely): the transition runs on to the end's section, the only ordinary one.
     let stub = start_junction.is_some() != end_junction.is_some()
         && (s_end > s_start || sac && s_end >= s_start)
-        && s_end - s_start < 0.5 * (r0 + r1);
-    if s_end - s_start < 0.5 * (r0 + r1) && !stub {
+        && s_end - s_start < MIN_ORDINARY_STRETCH * (r0 + r1);
+    if s_end - s_start < MIN_ORDINARY_STRETCH * (r0 + r1) && !stub {
         return Err(Error::Geometry(format!(
             "{}: only {:.3} mm of branch {name} (from {:.2} to {:.2} mm) has clean cross-sections, too short to \
              mesh; reduce centerline.trim_inlet/trim_outlet or check the surface's ends",

@@ -13,7 +13,7 @@ use crate::stages::junction::{
 };
 use crate::stages::projection::end_planes::EndCaps;
 use crate::stages::projection::{
-    clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup,
+    clear_transition_length, project_branch, JunctionEnd, ProjectedBranch, ProjectionSetup, MIN_ORDINARY_STRETCH,
 };
 use nalgebra::Point3;
 
@@ -129,10 +129,6 @@ pub fn plan_branches<'a>(
         })
         .collect()
 }
-
-/// Least stretch of ordinary sections between two junctions' transitions, in end radii (the
-/// sum of the branch's two end radii); less, and the branch is a bridge.
-pub const MIN_ORDINARY_STRETCH: f64 = 0.25;
 
 /// Which branches end blind in a saccular aneurysm's sac (see [`ends_in_sac`]), each renamed
 /// for it: "sac", or "sac_1", "sac_2", ... when there are several (see [`crate::geometry::mesh::is_sac`]).
