@@ -7,12 +7,32 @@ use crate::data::diagnostics::Warning;
 use crate::data::units::LengthUnit;
 use crate::geometry::surface::TriangleSurface;
 use crate::pipeline::finishing::Additions;
-use crate::pipeline::report::EndReport;
 use crate::stages::additions::side_ends::SideOpening;
 use crate::stages::annotation::Meshed;
 use crate::stages::centerline::extract::{EndKind, VesselEnd};
 use crate::stages::centerline::{CenterlineSample, CenterlineTree};
 use nalgebra::Point3;
+use serde::Serialize;
+
+/// One vessel end: found on the surface (or given), and whether the mesh reaches it.
+#[derive(Debug, Clone, Serialize)]
+pub struct EndReport {
+    /// The end's name in the mesh (its OpenFOAM patch, its sets `lumen_<name>` and
+    /// `wall_<name>`): `inlet`, `outlet` or `outlet_1`, ..., or the name of the cap given for it;
+    /// for an end not meshed, the cap's name or null.
+    pub name: Option<String>,
+    /// Centre of the end (output unit): a loop's or cap's centre, a dome's inscribed ball, a
+    /// given point's ball, or a given centerline's end point.
+    pub position: [f64; 3],
+    /// Radius of the end section (output unit).
+    pub radius: f64,
+    /// `open` (a boundary loop), `flat cap`, `tagged cap`, `dome` (a rounded or blunt closed
+    /// end), `given` (`--ends`) or `centerline` (an end of the centerlines given).
+    pub kind: &'static str,
+    pub inlet: bool,
+    /// Whether a meshed branch ends there.
+    pub meshed: bool,
+}
 
 /// The ends of a tree built on centerlines given: its inlet (the start of the branch with no
 /// junction upstream) and each leaf branch's last sample. Read from the tree rather than the

@@ -7,6 +7,7 @@ use crate::geometry::mesh::{Region, VesselMesh};
 use crate::geometry::quality::{Bars, Stats};
 use crate::geometry::surface::TriangleSurface;
 use crate::io::input::HygieneReport;
+pub use crate::pipeline::ends::EndReport;
 use crate::pipeline::ends::{end_reports, ends_cut_short, ends_left_out, ends_not_meshed};
 use crate::pipeline::MeshedVessel;
 use crate::stages::annotation::accuracy::SurfaceAccuracy;
@@ -96,26 +97,6 @@ pub struct JunctionReport {
     pub sac_elements: usize,
     pub scaled_jacobian: Stats,
     pub lumen_equiangle_skew: Stats,
-}
-
-/// One vessel end: found on the surface (or given), and whether the mesh reaches it.
-#[derive(Debug, Clone, Serialize)]
-pub struct EndReport {
-    /// The end's name in the mesh (its OpenFOAM patch, its sets `lumen_<name>` and
-    /// `wall_<name>`): `inlet`, `outlet` or `outlet_1`, ..., or the name of the cap given for it;
-    /// for an end not meshed, the cap's name or null.
-    pub name: Option<String>,
-    /// Centre of the end (output unit): a loop's or cap's centre, a dome's inscribed ball, a
-    /// given point's ball, or a given centerline's end point.
-    pub position: [f64; 3],
-    /// Radius of the end section (output unit).
-    pub radius: f64,
-    /// `open` (a boundary loop), `flat cap`, `tagged cap`, `dome` (a rounded or blunt closed
-    /// end), `given` (`--ends`) or `centerline` (an end of the centerlines given).
-    pub kind: &'static str,
-    pub inlet: bool,
-    /// Whether a meshed branch ends there.
-    pub meshed: bool,
 }
 
 #[derive(Debug, Clone, Serialize)]

@@ -1305,7 +1305,7 @@ fn best_sweep(
     let mut best: Option<(f64, Vec<ProjectedSection>)> = None;
     for (jacobians, sections) in cast {
         let w = worst(&jacobians);
-        if best.as_ref().map_or(true, |(b, _)| w > *b) {
+        if best.as_ref().is_none_or(|(b, _)| w > *b) {
             best = Some((w, sections));
         }
     }
@@ -1460,7 +1460,7 @@ fn bridge(
     };
     let inner = match attempt(BridgeSweep::Straight) {
         Ok(straight) => straight,
-        Err(first) => best_sweep([BridgeSweep::OntoCenterline, BridgeSweep::CarriedFolds].map(|f| attempt(f)), judged)
+        Err(first) => best_sweep([BridgeSweep::OntoCenterline, BridgeSweep::CarriedFolds].map(attempt), judged)
             .map_err(|_| first)?,
     };
     let mut out = vec![up.fold];
