@@ -28,9 +28,9 @@ pub use dome::DomeTop;
 /// Least stretch of ordinary sections a branch is meshed with, in end radii (the sum of the
 /// stretch's two end radii: half of it is one mean radius). Between two junctions' transitions,
 /// less and the branch is a bridge; [`project_branch`] holds every stretch to the same, so no
-/// branch falls between the two (random trees 47 and 66: 1.0 and 1.3 mm between transitions,
-/// for radii of 2.4 mm, were above the bridges' old 0.25 and below the sections' 0.5: refused
-/// as too short to mesh).
+/// branch falls between the two (random trees 47 and 66, 1.0 and 1.3 mm between transitions,
+/// tree 66's for radii of 2.35 mm, were above the bridges' old 0.25 and below the sections' 0.5:
+/// refused as too short to mesh).
 pub const MIN_ORDINARY_STRETCH: f64 = 0.5;
 /// Hit triangles whose normal is within this cosine of the axis mark a cap (about 70 degrees
 /// from the wall direction of a tube) ...
@@ -841,7 +841,8 @@ pub fn clear_transition_length(
         d -= step;
     }
     // Still none: a stub's transition in fact runs from its end's own section (see
-    // `project_branch`), past `reach`; the fold need lie ahead of that one only.
+    // `project_branch`), past `reach`; the fold need lie ahead of that one only. (A dome's
+    // section stands half a radius further in; should its transition fold, the elements say so.)
     let end_trim = if at_start { setup.trim_outlet } else { setup.trim_inlet };
     let end_section = len - end_trim * at(len).radius;
     if setup.steep_short_branches
