@@ -56,10 +56,9 @@ fn a_bridge_around_a_hairpin_carries_its_folds_along_its_centerline() {
     let tree = common::mesh_random_tree(23, "bridge");
     tree.assert_every_end_and_min_sj();
     let (seed, mesh) = (tree.seed, &tree.vessel.meshed.mesh);
-    let (wall, lumen) = (mesh.wall_range(), mesh.lumen_range());
-    let wall_mean = wall.clone().map(|e| mesh.quality[e].scaled_jacobian).sum::<f64>() / wall.len() as f64;
+    let wall_mean = vesselhex::report::wall_report(mesh).all.scaled_jacobian.mean;
     assert!(wall_mean >= 0.85, "tree {seed}: wall mean scaled Jacobian {wall_mean}");
-    let skew = lumen.clone().map(|e| mesh.quality[e].equiangle_skew).sum::<f64>() / lumen.len() as f64;
+    let skew = vesselhex::report::lumen_report(mesh).equiangle_skew.mean;
     assert!(skew <= 0.35, "tree {seed}: lumen mean equi-angle skew {skew}");
     assert!(!bridges(&tree.vessel.meshed).is_empty(), "tree {seed}: no bridge");
     let _ = std::fs::remove_dir_all(&tree.dir);
