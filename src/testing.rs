@@ -39,6 +39,22 @@ pub fn straight_tube_surface(radius: f64, length: f64, around: usize, rings: usi
     TriangleSurface { vertices, triangles, triangle_tags: None, source: "straight-tube (in memory)".into() }
 }
 
+/// [`straight_tube_surface`] closed at both ends by flat caps fanned from the axis, outward
+/// normals.
+pub fn capped_tube_surface(radius: f64, length: f64, around: usize, rings: usize) -> TriangleSurface {
+    let mut tube = straight_tube_surface(radius, length, around, rings);
+    let id = |i: usize, j: usize| (j * around + i % around) as u32;
+    let (bottom, top) = (tube.vertices.len() as u32, tube.vertices.len() as u32 + 1);
+    tube.vertices.push(Point3::new(0.0, 0.0, 0.0));
+    tube.vertices.push(Point3::new(0.0, 0.0, length));
+    for i in 0..around {
+        tube.triangles.push([bottom, id(i + 1, 0), id(i, 0)]);
+        tube.triangles.push([top, id(i, rings), id(i + 1, rings)]);
+    }
+    tube.source = "capped-tube (in memory)".into();
+    tube
+}
+
 /// A tube of radius `radius` along +z, from a flat cap in the plane z = x tan(`tilt`) (fanned
 /// from its centre at the origin) to z = `length` (open): a vessel clipped off square.
 pub fn tilted_cap_tube_surface(radius: f64, length: f64, tilt: f64) -> TriangleSurface {

@@ -185,35 +185,11 @@ impl CutLoop {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::surface::TriangleSurface;
     use std::path::PathBuf;
 
     /// A closed cylinder along z: radius r, from z = 0 to z = h, with fan caps.
     fn cylinder(r: f64, h: f64, around: usize, rings: usize) -> LumenSurface {
-        let mut vertices = vec![];
-        let mut triangles = vec![];
-        for j in 0..=rings {
-            for i in 0..around {
-                let a = std::f64::consts::TAU * i as f64 / around as f64;
-                vertices.push(Point3::new(r * a.cos(), r * a.sin(), h * j as f64 / rings as f64));
-            }
-        }
-        let id = |i: usize, j: usize| (j * around + i % around) as u32;
-        for j in 0..rings {
-            for i in 0..around {
-                triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        let (bottom, top) = (vertices.len() as u32, vertices.len() as u32 + 1);
-        vertices.push(Point3::new(0.0, 0.0, 0.0));
-        vertices.push(Point3::new(0.0, 0.0, h));
-        for i in 0..around {
-            triangles.push([bottom, id(i + 1, 0), id(i, 0)]);
-            triangles.push([top, id(i, rings), id(i + 1, rings)]);
-        }
-        let surface = TriangleSurface { vertices, triangles, triangle_tags: None, source: PathBuf::from("cyl") };
-        LumenSurface::new(&surface).unwrap()
+        LumenSurface::new(&crate::testing::capped_tube_surface(r, h, around, rings)).unwrap()
     }
 
     fn plane_at(z: f64, tilt: f64) -> Plane {

@@ -6,6 +6,7 @@
 
 use crate::data::error::{Error, Result};
 use crate::geometry::vector::any_perpendicular;
+use crate::geometry::winding::WindingTree;
 use nalgebra::{Point3, Vector3};
 use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::PointQuery;
@@ -13,7 +14,7 @@ use parry3d_f64::query::Ray;
 use parry3d_f64::shape::{CompositeShapeRef, TriMesh, TriMeshFlags};
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::Mutex;
+use std::sync::{Mutex, OnceLock};
 
 /// A triangulated lumen surface, lengths in millimetres.
 #[derive(Debug, Clone)]
@@ -52,11 +53,11 @@ pub struct LumenSurface {
     /// Unit normal of each triangle, as wound in the file (may face in or out).
     pub normals: Vec<Vector3<f64>>,
     pub source: PathBuf,
-    /// The winding numbers computed so far, by point (its coordinates' bits): each costs a pass
-    /// over every triangle, and a vessel meshed again another way (the pipeline's retries) is
-    /// probed at the same centerline points again (random tree 2 at coarse: 7 of the 50 s of
-    /// an attempt, 0.4-1.3 s once known).
+    /// The winding numbers computed so far, by point (its coordinates' bits): a vessel meshed
+    /// again another way (the pipeline's retries) is probed at the same centerline points again.
     windings: Mutex<HashMap<[u64; 3], f64>>,
+    /// The triangles' cluster tree for winding numbers, built when one is first asked.
+    winding_tree: OnceLock<WindingTree>,
 }
 
 /// Relative (and, times the coordinates' size, absolute) slack of [`LumenSurface::closest_near`]'s
@@ -96,7 +97,15 @@ impl LumenSurface {
         let pv = vertices.iter().map(to_p).collect();
         let trimesh = TriMesh::new(pv, triangles.clone())
             .map_err(|e| Error::input(&source, format!("cannot index the surface triangles: {e:?}")))?;
-        Ok(LumenSurface { trimesh, vertices, triangles, normals, source, windings: Mutex::default() })
+        Ok(LumenSurface {
+            trimesh,
+            vertices,
+            triangles,
+            normals,
+            source,
+            windings: Mutex::default(),
+            winding_tree: OnceLock::new(),
+        })
     }
 
     /// The first intersection of the ray `origin + t dir` (|dir| = 1) with the surface for
@@ -170,28 +179,11 @@ impl LumenSurface {
         })
     }
 
-    /// [`Self::winding_number`] computed: the same value whenever asked.
+    /// [`Self::winding_number`] computed (see [`crate::geometry::winding`]): the same value
+    /// whenever asked.
     fn winding_number_of(&self, p: &Point3<f64>) -> f64 {
-        // Each vertex's offset and its length once, not once per triangle around it.
-        let from_p: Vec<(Vector3<f64>, f64)> = self
-            .vertices
-            .iter()
-            .map(|v| {
-                let d = v - p;
-                (d, d.norm())
-            })
-            .collect();
-        let total: f64 = self
-            .triangles
-            .iter()
-            .map(|t| {
-                let [(a, la), (b, lb), (c, lc)] = t.map(|i| from_p[i as usize]);
-                let num = a.dot(&b.cross(&c));
-                let den = la * lb * lc + a.dot(&b) * lc + a.dot(&c) * lb + b.dot(&c) * la;
-                2.0 * num.atan2(den)
-            })
-            .sum();
-        total / (4.0 * std::f64::consts::PI)
+        let tree = self.winding_tree.get_or_init(|| WindingTree::new(&self.vertices, &self.triangles));
+        tree.winding_number(&self.vertices, &self.triangles, p)
     }
 
     /// The triangles that may cross the plane through `centre` normal to `normal` (unit) within
