@@ -156,8 +156,8 @@ fn rounds(has_junctions: bool) -> Vec<Vec<JunctionOptimisation>> {
 /// cohort at coarse and medium and 23 random trees at coarse (59 vessels, 102 meshes of them,
 /// retries included): of the 43 meshes whose lumen was folded in every finish after the first
 /// two rounds, none met the bars after all four; two lumens came out valid, at 0.012 and 0.015.
-/// A tree whose layout folds is meshed again another way (see [`super`]), each time through
-/// every round: random tree 65 at coarse built 42 finishes for its one mesh.
+/// A tree whose layout folds is meshed again another way (see [`super`]); while each attempt
+/// built every round, random tree 65 at coarse built 42 volumes for its one mesh.
 const UNFOLDING_ROUNDS: usize = 2;
 
 /// Whether some junction has a lumen element folded (validity not positive) in every finish
