@@ -403,6 +403,11 @@ fn normals_point_out_of_the_lumen_and_the_volume_matches() {
     }
 }
 
+/// How far a winding number may lie from 1 inside and 0 outside a closed surface: they are
+/// summed with far clusters expanded (`vesselhex::geometry::winding`, within 1.3e-3 of the
+/// exact sum as measured there).
+const WINDING_TOLERANCE: f64 = 2e-3;
+
 #[test]
 fn centerline_points_are_inside_and_radii_match_the_surface() {
     for (fixture, mesh, centerlines) in committed_fixtures() {
@@ -430,12 +435,12 @@ fn centerline_points_are_inside_and_radii_match_the_surface() {
                     let before = closed.winding_number(&(p - o.outward * 0.01));
                     let past = closed.winding_number(&(p + o.outward * 0.01));
                     assert!(
-                        (before - 1.0).abs() < 1e-6 && past.abs() < 1e-6,
+                        (before - 1.0).abs() < WINDING_TOLERANCE && past.abs() < WINDING_TOLERANCE,
                         "{}: end {p:?}: {before}, {past}",
                         fixture.name
                     );
                 } else {
-                    assert!((w - 1.0).abs() < 1e-6, "{}: point {p:?} winding {w}", fixture.name);
+                    assert!((w - 1.0).abs() < WINDING_TOLERANCE, "{}: point {p:?} winding {w}", fixture.name);
                 }
                 // The radius is the distance to the analytic surface. Vertices lie on it, so it
                 // is never more than the distance to the nearest vertex; the triangles are chords
