@@ -9,7 +9,7 @@
 //! 37-ended random tree's run (probes along 73 branches against 234,403 triangles; its
 //! centerline stage 5.6 -> 2.1 s).
 //!
-//! Accuracy: a cluster of radius `r` is expanded only from beyond [`FAR_FIELD`] times `r`, where
+//! Accuracy: a cluster of radius `r` is expanded only from beyond `FAR_FIELD` times `r`, where
 //! the neglected terms are of order `(r / d)^3` of its solid angle. Measured against the exact
 //! sum around a tube of 20,000 triangles, open and closed (4,200 points inside, outside, within
 //! 0.001 radii of the wall, past the open rims), the difference is at most 1.3e-3 (7.8e-3 from
@@ -18,7 +18,7 @@
 //! to those of the exact sum.
 //!
 //! Memory: a cluster takes about 300 bytes and a tree holds one for every six triangles (leaves
-//! of up to [`LEAF_TRIANGLES`]); a surface's tree is built when its first winding number is
+//! of up to `LEAF_TRIANGLES`); a surface's tree is built when its first winding number is
 //! asked. Random tree 41 (234,403 triangles) peaks at 514 MB against 483 MB without; with leaves
 //! of eight and the second moments stored whole, 565 MB.
 //!
@@ -212,7 +212,7 @@ fn unpack(p: &[f64; 6]) -> Matrix3<f64> {
 }
 
 /// The signed solid angle of the triangle `[a, b, c]` seen from `p` (Van Oosterom and Strackee).
-pub fn solid_angle([a, b, c]: [Point3<f64>; 3], p: &Point3<f64>) -> f64 {
+fn solid_angle([a, b, c]: [Point3<f64>; 3], p: &Point3<f64>) -> f64 {
     let (a, b, c) = (a - p, b - p, c - p);
     let (la, lb, lc) = (a.norm(), b.norm(), c.norm());
     let num = a.dot(&b.cross(&c));

@@ -2,7 +2,8 @@
 //! round (how the junction optimisation may move the lumen's nodes, and how the junction's wall
 //! grows), each judged on its junctions' elements and its wall. The best finish is kept, with
 //! each junction's own nodes taken from the finish best for that junction (see [`compose`]); a
-//! round after the first is built only while no such mesh meets the bars.
+//! round after the first is built only while no such mesh meets the bars, and a round after the
+//! second only while no junction's lumen is folded in every finish (see `UNFOLDING_ROUNDS`).
 
 use crate::data::config::WallGrowth;
 use crate::geometry::mesh::VesselMesh;
