@@ -348,7 +348,7 @@ pub struct MeshedVessel {
 }
 
 /// Meshes a vessel from its surface and centerlines (both already in mm), with the retry
-/// policies of [`policy::books_then_sectors`]: two junctions whose blocks would overlap are
+/// policies of [`policy::merged_then_apart`]: two junctions whose blocks would overlap are
 /// merged; a vessel with merged junctions, or one refused as asked, has its junctions spaced as
 /// at the coarse preset when a finer spacing was asked and none set for them, said in
 /// [`Meshed::notes`].
@@ -381,7 +381,7 @@ pub(crate) fn mesh_vessel_on(
         }
     };
     checks::check_centerline_file(lumen_surface, centerlines)?;
-    policy::books_then_sectors(surface, lumen_surface, centerlines, config, progress)
+    policy::merged_then_apart(surface, lumen_surface, centerlines, config, progress)
 }
 
 /// Meshes a vessel from its indexed surface and its centerline tree (both in mm).
