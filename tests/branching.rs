@@ -550,5 +550,7 @@ fn close_junctions_whose_merge_folds_are_merged_where_their_blocks_overlap() {
     assert!(wall_mean >= MIN_WALL_MEAN_SJ, "tree {seed}: wall mean scaled Jacobian {wall_mean}");
     let skew = vesselhex::report::lumen_report(mesh).equiangle_skew.mean;
     assert!(skew <= MAX_LUMEN_MEAN_SKEW, "tree {seed}: lumen mean equi-angle skew {skew}");
+    let warnings = &tree.vessel.settings.warnings;
+    assert!(warnings.iter().any(|w| w.kind == "junctions_apart"), "tree {seed}: no junctions_apart warning");
     let _ = std::fs::remove_dir_all(&tree.dir);
 }

@@ -69,12 +69,25 @@ pub(crate) fn merged_then_apart(
         centerline: crate::data::config::CenterlineConfig { junction_merge_radii: 0.0, ..config.centerline.clone() },
         ..config.clone()
     };
+    let said = |mut meshed: Meshed, merged: &str| {
+        meshed.notes.push(Warning::new(
+            "junctions_apart",
+            format!(
+                "junctions closer than centerline.junction_merge_radii ({}) are meshed apart, merged only where \
+                 their blocks overlap: merged, {merged}",
+                config.centerline.junction_merge_radii
+            ),
+        ));
+        meshed
+    };
     match (merged, books_then_sectors(surface, lumen_surface, centerlines, &apart, progress)) {
-        (Ok(a), Ok(b)) => {
-            Ok(if quality.is_none_or(|q| FinishQuality::of_mesh(&b.mesh).better_than(&q)) { b } else { a })
-        }
+        (Ok(a), Ok(b)) => Ok(if quality.is_none_or(|q| FinishQuality::of_mesh(&b.mesh).better_than(&q)) {
+            said(b, "the mesh was short of a quality bar")
+        } else {
+            a
+        }),
         (Ok(a), Err(_)) => Ok(a),
-        (Err(_), Ok(b)) => Ok(b),
+        (Err(e), Ok(b)) => Ok(said(b, &format!("the vessel was refused: {e}"))),
         (Err(e), Err(_)) => Err(e),
     }
 }
