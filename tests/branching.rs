@@ -537,10 +537,10 @@ fn non_planar_junctions_mesh_in_sectors_within_the_bars() {
 
 /// Random tree 50 (13 ends): three bifurcations lie within 0.6 mm of one another, a third of
 /// their radius. Merged for lying close, their junction of five branches stays at the first
-/// one's centre, and folds there whichever way the rest of the tree is merged (the tree was
-/// refused). Meshed again with only the junctions whose blocks overlap merged, the same five
-/// branches meet in a junction centred along the short branches between them, and the tree
-/// meshes with every end, within every bar.
+/// one's centre (another pair of junctions overlaps, and only that pair is centred along its
+/// branch) and folds there: the tree was refused. Meshed again with only the junctions whose
+/// blocks overlap merged, the same five branches meet in a junction centred along the short
+/// branches between them, and the tree meshes with every end, within every bar.
 #[test]
 fn close_junctions_whose_merge_folds_are_merged_where_their_blocks_overlap() {
     let tree = mesh_random_tree(50, "apart");
