@@ -56,8 +56,8 @@ pub(crate) fn merged_then_apart(
     progress: &mut Progress,
 ) -> Result<Meshed> {
     let merged = books_then_sectors(surface, lumen_surface, centerlines, config, progress);
-    let quality = merged.as_ref().ok().map(|m| FinishQuality::of_mesh(&m.mesh));
-    if quality.as_ref().is_some_and(FinishQuality::meets_bars) || config.centerline.junction_merge_radii == 0.0 {
+    let within_bars = merged.as_ref().is_ok_and(|m| FinishQuality::of_mesh(&m.mesh).meets_bars());
+    if within_bars || config.centerline.junction_merge_radii == 0.0 {
         return merged;
     }
     let merged_close = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))
@@ -69,26 +69,45 @@ pub(crate) fn merged_then_apart(
         centerline: crate::data::config::CenterlineConfig { junction_merge_radii: 0.0, ..config.centerline.clone() },
         ..config.clone()
     };
-    let said = |mut meshed: Meshed, merged: &str| {
-        meshed.notes.push(Warning::new(
-            "junctions_apart",
-            format!(
-                "junctions closer than centerline.junction_merge_radii ({}) are meshed apart, merged only where \
-                 their blocks overlap: merged, {merged}",
-                config.centerline.junction_merge_radii
-            ),
-        ));
-        meshed
+    let merged_was = match &merged {
+        Ok(_) => "the mesh was short of a quality bar".to_string(),
+        Err(e) => format!("the vessel was refused: {e}"),
     };
-    match (merged, books_then_sectors(surface, lumen_surface, centerlines, &apart, progress)) {
-        (Ok(a), Ok(b)) => Ok(if quality.is_none_or(|q| FinishQuality::of_mesh(&b.mesh).better_than(&q)) {
-            said(b, "the mesh was short of a quality bar")
+    match better_of(merged, books_then_sectors(surface, lumen_surface, centerlines, &apart, progress)) {
+        Ok((meshed, Kept::First)) => Ok(meshed),
+        Ok((mut meshed, Kept::Second)) => {
+            meshed.notes.push(Warning::new(
+                "junctions_apart",
+                format!(
+                    "junctions closer than centerline.junction_merge_radii ({}) are meshed apart, merged only \
+                     where their blocks overlap: merged, {merged_was}",
+                    config.centerline.junction_merge_radii
+                ),
+            ));
+            Ok(meshed)
+        }
+        Err((merged, _)) => Err(merged),
+    }
+}
+
+/// Which of two meshes of one vessel [`better_of`] kept.
+enum Kept {
+    First,
+    Second,
+}
+
+/// The better of two attempts at meshing one vessel, and which it was (the first of equals;
+/// judged as a junction's finishes are); both refusals when neither meshed.
+fn better_of(first: Result<Meshed>, second: Result<Meshed>) -> std::result::Result<(Meshed, Kept), (Error, Error)> {
+    match (first, second) {
+        (Ok(a), Ok(b)) => Ok(if FinishQuality::of_mesh(&b.mesh).better_than(&FinishQuality::of_mesh(&a.mesh)) {
+            (b, Kept::Second)
         } else {
-            a
+            (a, Kept::First)
         }),
-        (Ok(a), Err(_)) => Ok(a),
-        (Err(e), Ok(b)) => Ok(said(b, &format!("the vessel was refused: {e}"))),
-        (Err(e), Err(_)) => Err(e),
+        (Ok(a), Err(_)) => Ok((a, Kept::First)),
+        (Err(_), Ok(b)) => Ok((b, Kept::Second)),
+        (Err(a), Err(b)) => Err((a, b)),
     }
 }
 
@@ -112,14 +131,7 @@ fn books_then_sectors(
     }
     let sectors = LayoutPolicy::with_sectors();
     let laid_out = mesh_vessel_laid_out(surface, lumen_surface, centerlines, config, &sectors, progress);
-    match (meshed, laid_out) {
-        (Ok(a), Ok(b)) => {
-            Ok(if FinishQuality::of_mesh(&b.mesh).better_than(&FinishQuality::of_mesh(&a.mesh)) { b } else { a })
-        }
-        (Ok(a), Err(_)) => Ok(a),
-        (Err(_), Ok(b)) => Ok(b),
-        (Err(_), Err(e)) => Err(e),
-    }
+    better_of(meshed, laid_out).map(|(meshed, _)| meshed).map_err(|(_, sectors)| sectors)
 }
 
 /// Meshes the vessel; when it is refused, leaves out what the centerline extraction found and
