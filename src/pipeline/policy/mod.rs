@@ -8,8 +8,9 @@
 //!   junctions whose blocks would overlap become one, centred at each place in turn;
 //! - **coarser junction spacing** ([`coarser_junctions`]): a vessel with merged junctions, or one
 //!   refused as asked, has its junctions spaced as at the coarse preset;
-//! - **recentring close merges** ([`recentre_close_merges`]): junctions merged for being close
-//!   are centred elsewhere when their mesh is refused or short of a bar;
+//! - **recentring close merges** ([`recentre_close_merges`], [`mesh_merged_at_each_place`]):
+//!   junctions merged for being close are centred elsewhere when their mesh is refused or short
+//!   of a bar, with an overlapping pair's places where one is merged;
 //! - **close junctions apart** ([`merged_then_apart`]): a vessel refused or short of a bar with
 //!   close junctions merged is meshed again with only overlapping junctions merged;
 //! - **finishes** ([`junction_finish`]): the volume built with several junction optimisations
@@ -40,12 +41,12 @@ use nalgebra::Point3;
 /// first of equals; judged as a junction's finishes are).
 ///
 /// The two trees differ in more than the merges: a junction merged for lying close sits at the
-/// upstream one's centre, and is moved along the merged branches ([`recentre_close_merges`])
-/// only where no other pair of junctions overlaps; one merged for overlapping is centred along
-/// them from the start ([`MERGED_CENTRE_AT`]). Random tree 50 has three bifurcations within
-/// 0.6 mm, a third of their radius: merged as close, their five branches fold at the first
-/// centre, since another pair overlaps elsewhere; merged as overlapping, 0.17 mm along, they
-/// mesh. Most trees need the close merges (random trees 1-100 at coarse, merged only where
+/// upstream one's centre, and is moved along the merged branches ([`recentre_close_merges`],
+/// or with an overlapping pair's places, [`mesh_merged_at_each_place`]) only when that mesh
+/// fails; one merged for overlapping is centred along them from the start
+/// ([`MERGED_CENTRE_AT`]). Random tree 50 has three bifurcations within 0.6 mm, a third of their
+/// radius: merged as close, the tree is refused with them at the first centre and at each place
+/// tried with a pair overlapping elsewhere; merged as overlapping, 0.17 mm along, they mesh. Most trees need the close merges (random trees 1-100 at coarse, merged only where
 /// blocks overlap: 8 of the 81 that mesh with them fail, 6 refused and 2 with a branch left
 /// out), so they come first.
 pub(crate) fn merged_then_apart(
@@ -267,28 +268,27 @@ pub(super) fn mesh_vessel_laid_out(
     // junctions' folds, so they are spaced as at the coarse preset (see `coarser_junctions`).
     let merged_config = coarser.as_ref().unwrap_or(config);
     let segment = tree.segments[overlap.branch];
-    let mut best: Option<(Meshed, FinishQuality)> = None;
-    let mut first_error = None;
-    for at in MERGED_CENTRE_AT {
-        let attempt = merged_tree(centerlines, merged_config, lumen_surface, segment, at, policy).and_then(|tree| {
-            mesh_tree(surface, lumen_surface, tree, &centerlines.source, merged_config, false, policy, progress)
-        });
-        match attempt {
-            Ok(meshed) => {
-                let quality = FinishQuality::of_mesh(&meshed.mesh);
-                let meets_bars = quality.meets_bars();
-                if best.as_ref().is_none_or(|(_, b)| quality.better_than(b)) {
-                    best = Some((meshed, quality));
-                }
-                // The first place within the bars is kept: each costs a whole mesh.
-                if meets_bars {
-                    break;
-                }
-            }
-            Err(e) => {
-                first_error.get_or_insert(e);
-            }
-        }
+    // The junctions merged for lying close stay at their upstream centres first, as where
+    // nothing overlaps; where no place meets the bars so, they are centred at each place too
+    // (random tree 37: refused with them at their first centres, it meets the bars with them
+    // centred along too).
+    let each_place = |close: &[usize], best, progress: &mut Progress| {
+        mesh_merged_at_each_place(
+            surface,
+            lumen_surface,
+            centerlines,
+            merged_config,
+            (segment, close),
+            policy,
+            best,
+            progress,
+        )
+    };
+    let (mut best, mut first_error) = each_place(&[], None, progress);
+    if !tree.close_merges.is_empty() && !best.as_ref().is_some_and(|(_, q)| q.meets_bars()) {
+        let (recentred, error) = each_place(&tree.close_merges, best, progress);
+        best = recentred;
+        first_error = first_error.or(error);
     }
     match (best, first_error) {
         (Some((mut meshed, _)), _) => {
@@ -319,6 +319,47 @@ pub(super) fn mesh_vessel_laid_out(
         }
         (None, None) => unreachable!("every place was tried"),
     }
+}
+
+/// The best mesh of a vessel whose two overlapping junctions are merged (`merge`: the junction
+/// at the end of its segment into the upstream one), with the junctions merged for lying close
+/// (its segments) centred along their segments too, at each place of [`MERGED_CENTRE_AT`] in
+/// turn; the first within the bars ends the search (each place costs a whole mesh). `best`, a
+/// mesh found before, wins ties (judged as a junction's finishes are). Returns the best and the
+/// first refusal.
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn mesh_merged_at_each_place(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    merge: (usize, &[usize]),
+    policy: &LayoutPolicy,
+    mut best: Option<(Meshed, FinishQuality)>,
+    progress: &mut Progress,
+) -> (Option<(Meshed, FinishQuality)>, Option<Error>) {
+    let mut first_error = None;
+    for at in MERGED_CENTRE_AT {
+        let attempt = merged_tree(centerlines, config, lumen_surface, merge, at, policy).and_then(|tree| {
+            mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, false, policy, progress)
+        });
+        match attempt {
+            Ok(meshed) => {
+                let quality = FinishQuality::of_mesh(&meshed.mesh);
+                let meets_bars = quality.meets_bars();
+                if best.as_ref().is_none_or(|(_, b)| quality.better_than(b)) {
+                    best = Some((meshed, quality));
+                }
+                if meets_bars {
+                    break;
+                }
+            }
+            Err(e) => {
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    (best, first_error)
 }
 
 /// The coarse preset's axial spacing, relative to the radius: what [`coarser_junctions`] spaces
@@ -424,23 +465,26 @@ pub(super) const MERGED_CENTRE_AT: [f64; 3] = [0.625, 0.75, 0.875];
 /// At most this many pairs of overlapping junctions are merged in one vessel.
 pub(super) const MAX_FORCED_MERGES: usize = 4;
 
-/// The tree with the junction at the end of `segment` merged into the upstream one (centred
-/// the fraction `at` along it), and any pair that overlaps after that merged too.
+/// The tree with the junction at the end of `merge.0` merged into the upstream one (centred
+/// the fraction `at` along it), the close merges `merge.1` centred so too, and any pair that
+/// overlaps after that merged too.
 pub(super) fn merged_tree(
     centerlines: &Centerlines,
     config: &MeshConfig,
     surface: &LumenSurface,
-    segment: usize,
+    (segment, close): (usize, &[usize]),
     at: f64,
     policy: &LayoutPolicy,
 ) -> Result<CenterlineTree> {
     let mut forced = vec![ForcedMerge { segment, at }];
+    forced.extend(close.iter().filter(|&&c| c != segment).map(|&c| ForcedMerge { segment: c, at }));
+    let recentred = forced.len() - 1;
     loop {
         let tree = CenterlineTree::build_merging(centerlines, &config.centerline, Some(surface), &forced)?;
         let junctions = analyse_junctions(&tree, surface, policy)?;
         let Some(overlap) = find_junction_overlap(&tree, &junctions, surface) else { return Ok(tree) };
         let next = tree.segments[overlap.branch];
-        if forced.len() >= MAX_FORCED_MERGES || forced.iter().any(|f| f.segment == next) {
+        if forced.len() - recentred >= MAX_FORCED_MERGES || forced.iter().any(|f| f.segment == next) {
             return Err(overlap.error);
         }
         forced.push(ForcedMerge { segment: next, at });
