@@ -46,9 +46,10 @@ use nalgebra::Point3;
 /// fails; one merged for overlapping is centred along them from the start
 /// ([`MERGED_CENTRE_AT`]). Random tree 50 has three bifurcations within 0.6 mm, a third of their
 /// radius: merged as close, the tree is refused with them at the first centre and at each place
-/// tried with a pair overlapping elsewhere; merged as overlapping, 0.17 mm along, they mesh. Most trees need the close merges (random trees 1-100 at coarse, merged only where
-/// blocks overlap: 8 of the 81 that mesh with them fail, 6 refused and 2 with a branch left
-/// out), so they come first.
+/// tried with a pair overlapping elsewhere; merged as overlapping, 0.17 mm along, they mesh.
+/// Most trees need the close merges (random trees 1-100 at coarse, merged only where blocks
+/// overlap: 8 of the 81 that mesh with them fail, 6 refused and 2 with a branch left out), so
+/// they come first.
 pub(crate) fn merged_then_apart(
     surface: &TriangleSurface,
     lumen_surface: &LumenSurface,
@@ -321,12 +322,12 @@ pub(super) fn mesh_vessel_laid_out(
     }
 }
 
-/// The best mesh of a vessel whose two overlapping junctions are merged (`merge`: the junction
-/// at the end of its segment into the upstream one), with the junctions merged for lying close
-/// (its segments) centred along their segments too, at each place of [`MERGED_CENTRE_AT`] in
-/// turn; the first within the bars ends the search (each place costs a whole mesh). `best`, a
-/// mesh found before, wins ties (judged as a junction's finishes are). Returns the best and the
-/// first refusal.
+/// The best mesh of a vessel whose two overlapping junctions are merged, centred at each place
+/// of [`MERGED_CENTRE_AT`] in turn; the first within the bars ends the search (each place costs
+/// a whole mesh). `merge`: the segment whose far junction is merged into its upstream one, and
+/// the segments of the junctions merged for lying close that are centred at the same place
+/// (none: they stay at their upstream centres). `best`, a mesh found before, wins ties (judged
+/// as a junction's finishes are). Returns the best and the first refusal.
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn mesh_merged_at_each_place(
     surface: &TriangleSurface,
@@ -478,13 +479,13 @@ pub(super) fn merged_tree(
 ) -> Result<CenterlineTree> {
     let mut forced = vec![ForcedMerge { segment, at }];
     forced.extend(close.iter().filter(|&&c| c != segment).map(|&c| ForcedMerge { segment: c, at }));
-    let recentred = forced.len() - 1;
+    let close_count = forced.len() - 1;
     loop {
         let tree = CenterlineTree::build_merging(centerlines, &config.centerline, Some(surface), &forced)?;
         let junctions = analyse_junctions(&tree, surface, policy)?;
         let Some(overlap) = find_junction_overlap(&tree, &junctions, surface) else { return Ok(tree) };
         let next = tree.segments[overlap.branch];
-        if forced.len() - recentred >= MAX_FORCED_MERGES || forced.iter().any(|f| f.segment == next) {
+        if forced.len() - close_count >= MAX_FORCED_MERGES || forced.iter().any(|f| f.segment == next) {
             return Err(overlap.error);
         }
         forced.push(ForcedMerge { segment: next, at });
