@@ -8,7 +8,7 @@
 //!   junctions whose blocks would overlap become one, centred at each place in turn;
 //! - **coarser junction spacing** ([`coarser_junctions`]): a vessel with merged junctions, or one
 //!   refused as asked, has its junctions spaced as at the coarse preset;
-//! - **recentring close merges** ([`recentre_close_merges`], [`mesh_merged_at_each_place`]):
+//! - **recentring close merges** ([`recentre_close_merges`], [`mesh_vessel_laid_out`]):
 //!   junctions merged for being close are centred elsewhere when their mesh is refused or short
 //!   of a bar, with an overlapping pair's places where one is merged;
 //! - **close junctions apart** ([`merged_then_apart`]): a vessel refused or short of a bar with
@@ -42,7 +42,7 @@ use nalgebra::Point3;
 ///
 /// The two trees differ in more than the merges: a junction merged for lying close sits at the
 /// upstream one's centre, and is moved along the merged branches ([`recentre_close_merges`],
-/// or with an overlapping pair's places, [`mesh_merged_at_each_place`]) only when that mesh
+/// or with an overlapping pair's places in [`mesh_vessel_laid_out`]) only when that mesh
 /// fails; one merged for overlapping is centred along them from the start
 /// ([`MERGED_CENTRE_AT`]). Random tree 50 has three bifurcations within 0.6 mm, a third of their
 /// radius: merged as close, the tree is refused with them at the first centre and at each place
@@ -273,17 +273,14 @@ pub(super) fn mesh_vessel_laid_out(
     // nothing overlaps; where no place meets the bars so, they are centred at each place too
     // (random tree 37: refused with them at their first centres, it meets the bars with them
     // centred along too).
+    // `close`: the close merges centred at each place with the overlapping pair (none: at their
+    // upstream centres).
     let each_place = |close: &[usize], best, progress: &mut Progress| {
-        mesh_merged_at_each_place(
-            surface,
-            lumen_surface,
-            centerlines,
-            merged_config,
-            (segment, close),
-            policy,
-            best,
-            progress,
-        )
+        best_at_each_place(best, |at| {
+            merged_tree(centerlines, merged_config, lumen_surface, (segment, close), at, policy).and_then(|tree| {
+                mesh_tree(surface, lumen_surface, tree, &centerlines.source, merged_config, false, policy, progress)
+            })
+        })
     };
     let (mut best, mut first_error) = each_place(&[], None, progress);
     if !tree.close_merges.is_empty() && !best.as_ref().is_some_and(|(_, q)| q.meets_bars()) {
@@ -322,29 +319,18 @@ pub(super) fn mesh_vessel_laid_out(
     }
 }
 
-/// The best mesh of a vessel whose two overlapping junctions are merged, centred at each place
-/// of [`MERGED_CENTRE_AT`] in turn; the first within the bars ends the search (each place costs
-/// a whole mesh). `merge`: the segment whose far junction is merged into its upstream one, and
-/// the segments of the junctions merged for lying close that are centred at the same place
-/// (none: they stay at their upstream centres). `best`, a mesh found before, wins ties (judged
-/// as a junction's finishes are). Returns the best and the first refusal.
-#[allow(clippy::too_many_arguments, clippy::type_complexity)]
-fn mesh_merged_at_each_place(
-    surface: &TriangleSurface,
-    lumen_surface: &LumenSurface,
-    centerlines: &Centerlines,
-    config: &MeshConfig,
-    merge: (usize, &[usize]),
-    policy: &LayoutPolicy,
+/// The vessel meshed (`mesh_at`) with its merged junctions centred at each place of
+/// [`MERGED_CENTRE_AT`] in turn, and the best mesh kept (`best`, a mesh found before, wins
+/// ties; judged as a junction's finishes are); the first within the bars ends the search, as
+/// each place costs a whole mesh. Returns the best and the first refusal.
+#[allow(clippy::type_complexity)]
+fn best_at_each_place(
     mut best: Option<(Meshed, FinishQuality)>,
-    progress: &mut Progress,
+    mut mesh_at: impl FnMut(f64) -> Result<Meshed>,
 ) -> (Option<(Meshed, FinishQuality)>, Option<Error>) {
     let mut first_error = None;
     for at in MERGED_CENTRE_AT {
-        let attempt = merged_tree(centerlines, config, lumen_surface, merge, at, policy).and_then(|tree| {
-            mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, false, policy, progress)
-        });
-        match attempt {
+        match mesh_at(at) {
             Ok(meshed) => {
                 let quality = FinishQuality::of_mesh(&meshed.mesh);
                 let meets_bars = quality.meets_bars();
@@ -435,26 +421,26 @@ pub(super) fn recentre_close_merges(
     policy: &LayoutPolicy,
     progress: &mut Progress,
 ) -> Result<Meshed> {
-    let mut best = meshed.as_ref().ok().map(|m| FinishQuality::of_mesh(&m.mesh));
-    let mut kept = meshed;
-    for at in MERGED_CENTRE_AT {
-        let forced: Vec<ForcedMerge> = close_merges.iter().map(|&segment| ForcedMerge { segment, at }).collect();
-        let attempt = CenterlineTree::build_merging(centerlines, &config.centerline, Some(lumen_surface), &forced)
-            .and_then(|tree| {
-                mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, false, policy, progress)
-            });
-        let Ok(meshed) = attempt else { continue };
-        let quality = FinishQuality::of_mesh(&meshed.mesh);
-        if best.as_ref().is_none_or(|b| quality.better_than(b)) {
-            let meets_bars = quality.meets_bars();
-            (best, kept) = (Some(quality), Ok(meshed));
-            // The first place within the bars is kept: each costs a whole mesh.
-            if meets_bars {
-                break;
-            }
+    let (best, refused) = match meshed {
+        Ok(m) => {
+            let quality = FinishQuality::of_mesh(&m.mesh);
+            (Some((m, quality)), None)
         }
+        Err(e) => (None, Some(e)),
+    };
+    // A place within the bars is always better than a mesh short of them: the search ends at
+    // the first as it always has.
+    let (best, _) = best_at_each_place(best, |at| {
+        let forced: Vec<ForcedMerge> = close_merges.iter().map(|&segment| ForcedMerge { segment, at }).collect();
+        CenterlineTree::build_merging(centerlines, &config.centerline, Some(lumen_surface), &forced).and_then(|tree| {
+            mesh_tree(surface, lumen_surface, tree, &centerlines.source, config, false, policy, progress)
+        })
+    });
+    match (best, refused) {
+        (Some((meshed, _)), _) => Ok(meshed),
+        (None, Some(e)) => Err(e),
+        (None, None) => unreachable!("a mesh given is kept"),
     }
-    kept
 }
 
 /// Where the junction merged from two overlapping ones is centred: fractions of the branch
