@@ -96,12 +96,14 @@ fn deepest_in_section(p: &Point3<f64>, tangent: &Vector3<f64>, radius: f64, lume
         return Vector3::zeros();
     }
     // The depth and the direction away from the nearest wall point, the depth's gradient where
-    // it is smooth and one side of its ridge where it is not.
-    let sound = |shift: Vector3<f64>| {
-        let near = lumen.closest(&(p + shift));
-        (near.distance, (p + shift - near.point) / near.distance.max(f64::MIN_POSITIVE), shift)
+    // it is smooth and one side of its ridge where it is not; and that wall point, near which a
+    // trial a step away finds its own (the same point, found faster: see `closest_near`).
+    let sound = |shift: Vector3<f64>, wall: Option<&Point3<f64>>| {
+        let q = p + shift;
+        let near = wall.map_or_else(|| lumen.closest(&q), |w| lumen.closest_near(&q, w));
+        (near.distance, (q - near.point) / near.distance.max(f64::MIN_POSITIVE), shift, near.point)
     };
-    let (mut deepest, mut away, mut at) = sound(Vector3::zeros());
+    let (mut deepest, mut away, mut at, mut wall) = sound(Vector3::zeros(), None);
     let mut step = FIRST_STEP * radius;
     // Every move deepens; the cap only bounds the work on a pathological surface.
     for _ in 0..MAX_MOVES {
@@ -116,10 +118,10 @@ fn deepest_in_section(p: &Point3<f64>, tangent: &Vector3<f64>, radius: f64, lume
             .filter(ahead)
             .map(|u| at + u * step)
             .filter(|c| c.norm() <= MAX_SHIFT * radius)
-            .map(sound)
+            .map(|c| sound(c, Some(&wall)))
             .max_by(|a, b| a.0.total_cmp(&b.0));
         match best {
-            Some((d, u, c)) if d > deepest => (deepest, away, at) = (d, u, c),
+            Some((d, u, c, w)) if d > deepest => (deepest, away, at, wall) = (d, u, c, w),
             _ => step *= 0.5,
         }
     }
