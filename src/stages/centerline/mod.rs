@@ -6,6 +6,7 @@
 //! never used: they are undefined on straight parts and flip at inflection points, which would
 //! twist the O-grid blocks and shear the elements.
 
+mod bend;
 pub mod extract;
 mod junction_centre;
 mod rooted;

@@ -242,7 +242,7 @@ fn recentre_merged(node: &mut Node, edges: &mut [Edge], into: usize, daughters: 
     }
     let skip = if on_next { k + 1 } else { k };
     let shift = centre - node.point;
-    let blend = (super::junction_centre::BLEND_MOVES * shift.norm()).max(2.0 * node.radius);
+    let blend = (super::bend::BLEND_MOVES * shift.norm()).max(2.0 * node.radius);
     for &d in daughters {
         let l = &mut edges[d].line;
         if l.points.len() >= line.points.len() && l.points[..line.points.len()] == line.points[..] {
@@ -251,7 +251,7 @@ fn recentre_merged(node: &mut Node, edges: &mut [Edge], into: usize, daughters: 
             l.radii.splice(0..skip, [radius]);
             l.normals = None;
         } else {
-            super::junction_centre::bend_end(&mut l.points, &mut l.radii, true, shift, radius, blend);
+            super::bend::bend_end(&mut l.points, &mut l.radii, true, shift, radius, blend);
         }
     }
     if head.points.len() >= 2 {
