@@ -4,23 +4,8 @@
 
 use super::centerline::{insert_sample, sample_at};
 use super::layout::{Layout, Stenosis};
-use super::model::{vessel_pieces, Finish, Piece, PieceIndex, Sac, Zone};
+use super::model::{vessel_pieces, Finish, NearPass, Piece, PieceIndex, Sac, Zone};
 use super::rng::SeededRng;
-use nalgebra::Point3;
-
-/// Two walls that come within the smaller radius of each other without blending.
-#[derive(Debug, Clone, PartialEq)]
-pub struct NearPass {
-    /// Components (vessels, then sacs after the last vessel), in order.
-    pub a: usize,
-    pub b: usize,
-    /// Wall-to-wall gap, mm, and where on each centerline.
-    pub gap: f64,
-    pub point_a: Point3<f64>,
-    pub point_b: Point3<f64>,
-    pub radius_a: f64,
-    pub radius_b: f64,
-}
 
 impl Layout {
     /// Rebuilds the index from the vessels' samples (after stenoses changed them) and the sacs.

@@ -289,6 +289,20 @@ pub fn vessel_pieces(comp: usize, samples: &[Sample]) -> Vec<Piece> {
     samples.windows(2).map(|w| Piece::from_samples(comp, &w[0], &w[1])).collect()
 }
 
+/// Two walls that come within the smaller radius of each other without blending.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NearPass {
+    /// Components (vessels, then sacs after the last vessel), in order.
+    pub a: usize,
+    pub b: usize,
+    /// Wall-to-wall gap, mm, and where on each centerline.
+    pub gap: f64,
+    pub point_a: Point3<f64>,
+    pub point_b: Point3<f64>,
+    pub radius_a: f64,
+    pub radius_b: f64,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

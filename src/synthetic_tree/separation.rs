@@ -15,9 +15,8 @@
 //! then hold both walls).
 
 use super::centerline::sample_at;
-use super::features::NearPass;
 use super::layout::Layout;
-use super::model::{vessel_pieces, Contact, Piece};
+use super::model::{vessel_pieces, Contact, NearPass, Piece};
 use crate::implicit_surface::ImplicitFunction;
 use nalgebra::Point3;
 

@@ -7,9 +7,9 @@
 //! description.
 
 use super::centerline::{sample_at, Sample};
-use super::features::NearPass;
 use super::layout::Layout;
 use super::model::Finish;
+use super::model::NearPass;
 use crate::implicit_surface::{EndCircle, ImplicitFunction, TriangulatedSurface};
 use crate::input::{CenterlinePolyline, Centerlines};
 use indexmap::IndexMap;
