@@ -272,9 +272,8 @@ fn centroid(dt: &Delaunay, samples: &[Point3<f64>], t: usize) -> Point3<f64> {
 
 /// Per tetrahedron, the distance from its centroid to the surface when the centroid lies
 /// inside it (and is not on it). The corners lie on the surface (to rounding, hence the
-/// thousandth), so the nearest surface point is no farther than the nearest corner, and the
-/// search skips every triangle beyond it: bounded by the farthest corner instead, this was an
-/// eighth of random tree 1's CPU samples.
+/// thousandth), so the nearest surface point is no farther than the nearest corner: the search
+/// skips every triangle beyond it (the farthest corner, the bound before, let it visit more).
 fn centroid_depths(dt: &Delaunay, samples: &[Point3<f64>], solid: &SolidSurface) -> Vec<Option<f64>> {
     (0..dt.tets.len())
         .into_par_iter()
