@@ -12,7 +12,7 @@
 //! Only where the section is the vessel's own: near a junction, a sac or an open end, the normal
 //! plane runs into another vessel or out of the lumen, and its deepest point belongs to that.
 
-use crate::geometry::surface::LumenSurface;
+use crate::geometry::surface::{Closest, LumenSurface};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
@@ -54,12 +54,13 @@ pub fn ridge_shifts(points: &[Point3<f64>], s: &[f64], lumen: &LumenSurface) -> 
                 return Vector3::zeros();
             }
             let tangent = points[i + 1] - points[i - 1];
-            let radius = lumen.closest(&points[i]).distance;
+            let wall = lumen.closest(&points[i]);
+            let radius = wall.distance;
             if !(radius > 0.0 && radius.is_finite()) {
                 return Vector3::zeros();
             }
             let ramp = (s[i].min(length - s[i]) / radius).min(1.0);
-            deepest_in_section(&points[i], &tangent, radius, lumen) * ramp
+            deepest_in_section(&points[i], &tangent, &wall, lumen) * ramp
         })
         .collect();
     interpolate(&keys, &key_shifts, s)
@@ -79,11 +80,12 @@ fn interpolate(keys: &[usize], key_shifts: &[Vector3<f64>], s: &[f64]) -> Vec<Ve
     shifts
 }
 
-/// From `p` (depth `radius`, positive) to the deepest point of its section normal to `tangent`, within
-/// [`MAX_SHIFT`] radii; zero when the section is not the vessel's own. A pattern search: the
-/// depth is not smooth on the ridge (a cone's apex in a round section), where gradient steps
-/// would zig-zag.
-fn deepest_in_section(p: &Point3<f64>, tangent: &Vector3<f64>, radius: f64, lumen: &LumenSurface) -> Vector3<f64> {
+/// From `p` (its nearest wall point `near`, at a positive depth) to the deepest point of its
+/// section normal to `tangent`, within [`MAX_SHIFT`] radii; zero when the section is not the
+/// vessel's own. A pattern search: the depth is not smooth on the ridge (a cone's apex in a
+/// round section), where gradient steps would zig-zag.
+fn deepest_in_section(p: &Point3<f64>, tangent: &Vector3<f64>, near: &Closest, lumen: &LumenSurface) -> Vector3<f64> {
+    let radius = near.distance;
     let Some(t) = tangent.try_normalize(0.0) else { return Vector3::zeros() };
     let e1 = crate::geometry::vector::any_perpendicular(&t);
     let e2 = t.cross(&e1);
@@ -98,12 +100,13 @@ fn deepest_in_section(p: &Point3<f64>, tangent: &Vector3<f64>, radius: f64, lume
     // The depth and the direction away from the nearest wall point, the depth's gradient where
     // it is smooth and one side of its ridge where it is not; and that wall point, near which a
     // trial a step away finds its own (the same point, found faster: see `closest_near`).
-    let sound = |shift: Vector3<f64>, wall: Option<&Point3<f64>>| {
+    let away_from = |q: Point3<f64>, near: &Closest| (q - near.point) / near.distance.max(f64::MIN_POSITIVE);
+    let sound = |shift: Vector3<f64>, wall: &Point3<f64>| {
         let q = p + shift;
-        let near = wall.map_or_else(|| lumen.closest(&q), |w| lumen.closest_near(&q, w));
-        (near.distance, (q - near.point) / near.distance.max(f64::MIN_POSITIVE), shift, near.point)
+        let near = lumen.closest_near(&q, wall);
+        (near.distance, away_from(q, &near), shift, near.point)
     };
-    let (mut deepest, mut away, mut at, mut wall) = sound(Vector3::zeros(), None);
+    let (mut deepest, mut away, mut at, mut wall) = (radius, away_from(*p, near), Vector3::zeros(), near.point);
     let mut step = FIRST_STEP * radius;
     // Every move deepens; the cap only bounds the work on a pathological surface.
     for _ in 0..MAX_MOVES {
@@ -118,7 +121,7 @@ fn deepest_in_section(p: &Point3<f64>, tangent: &Vector3<f64>, radius: f64, lume
             .filter(ahead)
             .map(|u| at + u * step)
             .filter(|c| c.norm() <= MAX_SHIFT * radius)
-            .map(|c| sound(c, Some(&wall)))
+            .map(|c| sound(c, &wall))
             .max_by(|a, b| a.0.total_cmp(&b.0));
         match best {
             Some((d, u, c, w)) if d > deepest => (deepest, away, at, wall) = (d, u, c, w),
