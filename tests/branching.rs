@@ -554,3 +554,35 @@ fn close_junctions_whose_merge_folds_are_merged_where_their_blocks_overlap() {
     assert!(warnings.iter().any(|w| w.kind == "junctions_apart"), "tree {seed}: no junctions_apart warning");
     let _ = std::fs::remove_dir_all(&tree.dir);
 }
+
+/// Random tree 73 (15 ends): past a side branch, its host vessel (radius 7 mm) turns 123
+/// degrees on a radius of curvature of 1.5 of its radii, a few radii from the junction. Its
+/// last ordinary section was sought where the run of sections after it also bent gently, which
+/// put it beyond the bend, 52 mm from the junction: the transition, interpolated from that
+/// section to the fold, cut across the bend and 146 elements were inverted. The transition now
+/// ends before the bend (its centerline turns less than 30 degrees, and more than 90 in the six
+/// radii after it), and the tree meshes with every end and every bar held.
+#[test]
+fn a_transition_stops_short_of_a_hairpin_past_its_junction() {
+    let tree = mesh_random_tree(73, "hairpin");
+    tree.assert_every_end_and_min_sj();
+    let (seed, meshed) = (tree.seed, &tree.vessel.meshed);
+    let wall_mean = vesselhex::report::wall_report(&meshed.mesh).all.scaled_jacobian.mean;
+    assert!(wall_mean >= MIN_WALL_MEAN_SJ, "tree {seed}: wall mean scaled Jacobian {wall_mean}");
+    let skew = vesselhex::report::lumen_report(&meshed.mesh).equiangle_skew.mean;
+    assert!(skew <= MAX_LUMEN_MEAN_SKEW, "tree {seed}: lumen mean equi-angle skew {skew}");
+    // The centerline's turn between two arc lengths, summed over short steps.
+    let turn = |branch: &vesselhex::centerline::Branch, from: f64, to: f64| -> f64 {
+        let steps = 64;
+        let s = |k: usize| from + (to - from) * k as f64 / steps as f64;
+        (0..steps).map(|k| branch.at(s(k)).frame.tangent.angle(&branch.at(s(k + 1)).frame.tangent).to_degrees()).sum()
+    };
+    let host = meshed.projected.iter().find(|p| meshed.tree.branches[p.branch].name == "branch_2").unwrap();
+    let branch = &meshed.tree.branches[host.branch];
+    assert!(matches!(host.start, BranchEnd::Fold(_)), "tree {seed}: branch_2 does not start at a junction");
+    let r = branch.at(0.0).radius;
+    let (across, beyond) = (turn(branch, 0.0, host.s_start), turn(branch, host.s_start, host.s_start + 6.0 * r));
+    assert!(across < 30.0, "tree {seed}: branch_2's transition turns {across:.0} degrees");
+    assert!(beyond > 90.0, "tree {seed}: branch_2 turns {beyond:.0} degrees in the 6 radii past its transition");
+    let _ = std::fs::remove_dir_all(&tree.dir);
+}
