@@ -722,6 +722,10 @@ const MAX_BEND: f64 = 0.5;
 /// not cross inside the lumen (a radius of curvature of one vessel radius): where no section
 /// past a junction stands on a gentle bend, the last ordinary one may stand on one up to this.
 const MAX_BEND_UNCROSSED: f64 = 1.0;
+/// A turn of the centerline this large between the estimate of a transition's length and its
+/// last ordinary section is a hairpin (the project's populations: 60-130 degrees within three
+/// radii), which a transition, interpolated between its ends, cannot follow.
+const HAIRPIN_TURN_DEG: f64 = 60.0;
 /// Length over which the curvature is measured, in radii.
 const BEND_BASE: f64 = 1.0;
 /// How far beyond the estimate the search for a clear section goes, in branch radii.
@@ -806,30 +810,39 @@ pub fn clear_transition_length(
     // clear. A branch that curls back past the junction's level (palabos_cerebral_aneurysm: an
     // outlet leaving a sac 14 mm in radius turns back down by 30 mm) puts the spine's ends
     // behind its later sections, which asked of them too left no section anywhere.
-    // For the same reason the run's sections need only the bend at which ordinary sections do
-    // not cross (as everywhere else in a vessel); the gentle bend is asked of the section the
-    // transition starts from. Asked of the whole run, a hairpin a few radii past the junction
-    // pushed the last section beyond it, and the transition, interpolated from that section to
-    // the fold, cut across the bend and folded (random tree 73: 52 mm instead of 17 mm past a
-    // junction, across a 123-degree bend on 1.5 radii; 146 elements inverted).
-    let last_section = |d: f64, max_bend: f64| {
+    // `run_bend`: the bend the run's sections past the first may stand on.
+    let last_section = |d: f64, max_bend: f64, run_bend: f64| {
         fold_ahead(d)
             && (0..=CLEAR_RUN_STEPS)
                 .map(|k| d + k as f64 * step)
                 .filter(|&x| x == d || x <= run_reach)
-                .all(|x| clear(x, if x == d { max_bend } else { max_bend.max(MAX_BEND_UNCROSSED) }))
+                .all(|x| clear(x, if x == d { max_bend } else { run_bend }))
     };
-    let search = |max_bend: f64| {
+    let search = |max_bend: f64, run_bend: f64| {
         let mut d = estimate;
         while d < estimate + CLEAR_SEARCH * r && before_far_end(d) && d <= reach {
-            if last_section(d, max_bend) {
+            if last_section(d, max_bend, run_bend) {
                 return Some(d);
             }
             d += step;
         }
         None
     };
-    if let Some(d) = search(MAX_BEND) {
+    if let Some(d) = search(MAX_BEND, MAX_BEND) {
+        // A transition is interpolated from its last ordinary section to the fold and cannot
+        // follow a bend: past a hairpin, its sections would cut across it (random tree 73: 52 mm
+        // past a junction, round a 123-degree bend on 1.5 radii; 146 elements inverted). There
+        // the run's sections need only the bend at which ordinary sections do not cross, as
+        // anywhere else in a vessel, and the search stops short of the hairpin (17 mm). Elsewhere
+        // the gentle run is kept: it draws a funnel out over more sections (random tree 34, with
+        // the shorter run everywhere: an intima element 0.219 -> 0.176).
+        let turn = at(estimate).frame.tangent.angle(&at(d).frame.tangent);
+        if turn.to_degrees() < HAIRPIN_TURN_DEG {
+            return Ok(Some(d));
+        }
+        if let Some(short) = search(MAX_BEND, MAX_BEND_UNCROSSED) {
+            return Ok(Some(short));
+        }
         return Ok(Some(d));
     }
     // Between two junctions, no clear section in this junction's half: the branch is a bridge.
@@ -841,7 +854,7 @@ pub fn clear_transition_length(
     // So may a sac's, when no section clears the junction between the estimate and its end.
     let mut d = reach;
     while setup.steep_short_branches && (estimate > reach || sac) && d >= NEAREST_SECTION * r {
-        if last_section(d, MAX_BEND) {
+        if last_section(d, MAX_BEND, MAX_BEND) {
             return Ok(Some(d));
         }
         d -= step;
@@ -862,14 +875,14 @@ pub fn clear_transition_length(
     // A bend tighter than the gentle one just past the junction, and the fold behind the
     // sections beyond it (a branch curling back): the bend that stops sections crossing inside
     // the lumen will do, and the elements decide.
-    if let Some(d) = search(MAX_BEND_UNCROSSED) {
+    if let Some(d) = search(MAX_BEND_UNCROSSED, MAX_BEND_UNCROSSED) {
         return Ok(Some(d));
     }
     // A sac's last chance before it is left out: the section at its largest ball's centre, the
     // dome's base, on such a bend. The search steps past it and the steep one asks the gentle
     // bend, yet only the dome lies beyond it, which no later section can cross (random tree 17:
     // a sac 0.86 mm from its junction, the estimate 0.78 mm, meshes; min scaled Jacobian 0.211).
-    if sac && last_section(len, MAX_BEND_UNCROSSED) {
+    if sac && last_section(len, MAX_BEND_UNCROSSED, MAX_BEND_UNCROSSED) {
         return Ok(Some(len));
     }
     let candidates = (0..).map(|k| estimate + k as f64 * step).take_while(|&x| before_far_end(x) && x <= reach);
