@@ -722,10 +722,12 @@ const MAX_BEND: f64 = 0.5;
 /// not cross inside the lumen (a radius of curvature of one vessel radius): where no section
 /// past a junction stands on a gentle bend, the last ordinary one may stand on one up to this.
 const MAX_BEND_UNCROSSED: f64 = 1.0;
-/// A turn of the centerline this large between the estimate of a transition's length and its
-/// last ordinary section is a hairpin (the project's populations: 60-130 degrees within three
-/// radii), which a transition, interpolated between its ends, cannot follow.
-const HAIRPIN_TURN_DEG: f64 = 60.0;
+/// Farthest the centerline between the estimate of a transition's length and its last
+/// ordinary section may stray from the straight line between them, in branch radii: half way
+/// to the wall, a transition interpolated between its ends no longer runs along the vessel.
+/// A steady bend strays little (random tree 34's parent, 69 degrees over two radii: 0.3), a
+/// hairpin far (random tree 73: a 123-degree bend on 1.5 radii).
+const MAX_TRANSITION_BOW: f64 = 0.5;
 /// Length over which the curvature is measured, in radii.
 const BEND_BASE: f64 = 1.0;
 /// How far beyond the estimate the search for a clear section goes, in branch radii.
@@ -828,16 +830,31 @@ pub fn clear_transition_length(
         }
         None
     };
+    // How far the centerline between two distances from the junction strays from the straight
+    // line between its ends.
+    let bow = |from: f64, to: f64| {
+        let (a, b) = (at(from).point, at(to).point);
+        let steps = ((to - from) / (0.25 * step)).ceil().max(1.0) as usize;
+        (1..steps)
+            .map(|k| {
+                let q = at(from + (to - from) * k as f64 / steps as f64).point;
+                let ab = b - a;
+                let t = ((q - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+                (q - (a + ab * t)).norm()
+            })
+            .fold(0.0, f64::max)
+    };
     if let Some(d) = search(MAX_BEND, MAX_BEND) {
-        // A transition is interpolated from its last ordinary section to the fold and cannot
-        // follow a bend: past a hairpin, its sections would cut across it (random tree 73: 52 mm
-        // past a junction, round a 123-degree bend on 1.5 radii; 146 elements inverted). There
-        // the run's sections need only the bend at which ordinary sections do not cross, as
-        // anywhere else in a vessel, and the search stops short of the hairpin (17 mm). Elsewhere
-        // the gentle run is kept: it draws a funnel out over more sections (random tree 34, with
-        // the shorter run everywhere: an intima element 0.219 -> 0.176).
-        let turn = at(estimate).frame.tangent.angle(&at(d).frame.tangent);
-        if turn.to_degrees() < HAIRPIN_TURN_DEG {
+        // A transition is interpolated from its last ordinary section to the fold: it follows
+        // a steady bend (its ends' tangents are the centerline's), not a vessel that bows away
+        // from the line between them, as past a hairpin (random tree 73: 52 mm past a junction,
+        // round a 123-degree bend on 1.5 radii; its sections cut across the bend and 146
+        // elements were inverted). There the run's sections need only the bend at which
+        // ordinary sections do not cross, as anywhere else in a vessel, and the search stops
+        // short of the hairpin (17 mm). Elsewhere the gentle run is kept: it draws a funnel out
+        // over more sections (random tree 34, its parent's transition on a steady 69-degree
+        // bend cut short: an intima element 0.219 -> 0.176).
+        if bow(estimate, d) <= MAX_TRANSITION_BOW * r {
             return Ok(Some(d));
         }
         if let Some(short) = search(MAX_BEND, MAX_BEND_UNCROSSED) {
