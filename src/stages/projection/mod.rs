@@ -725,8 +725,8 @@ const MAX_BEND_UNCROSSED: f64 = 1.0;
 /// Farthest the centerline between the estimate of a transition's length and its last
 /// ordinary section may stray from the straight line between them, in branch radii: half way
 /// to the wall, a transition interpolated between its ends no longer runs along the vessel.
-/// A steady bend strays little (random tree 34's parent, 69 degrees over two radii: 0.3), a
-/// hairpin far (random tree 73: a 123-degree bend on 1.5 radii).
+/// A steady bend strays little (random tree 34's parent, 69 degrees over two radii: 0.32), a
+/// hairpin far (random tree 73's host, a 123-degree bend on 1.5 radii: 1.47).
 const MAX_TRANSITION_BOW: f64 = 0.5;
 /// Length over which the curvature is measured, in radii.
 const BEND_BASE: f64 = 1.0;
