@@ -694,6 +694,21 @@ fn join_ends(
     Ok((out, start, end, dome))
 }
 
+/// How far the centerline (`at`, by distance from a junction) strays between distances `from`
+/// and `to` from the straight line between its points there, sampled every `spacing` or less.
+fn bow(at: &dyn Fn(f64) -> CenterlineSample, from: f64, to: f64, spacing: f64) -> f64 {
+    let (a, b) = (at(from).point, at(to).point);
+    let ab = b - a;
+    let samples = ((to - from) / spacing).ceil().max(1.0) as usize;
+    (1..samples)
+        .map(|k| {
+            let q = at(from + (to - from) * k as f64 / samples as f64).point;
+            let t = ((q - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+            (q - (a + ab * t)).norm()
+        })
+        .fold(0.0, f64::max)
+}
+
 /// Whether a branch between two junctions is a bridge (see [`bridge`]): the plan gives each
 /// junction half of it.
 fn is_bridge(lo: f64, hi: f64, length: f64) -> bool {
@@ -830,20 +845,6 @@ pub fn clear_transition_length(
         }
         None
     };
-    // How far the centerline between two distances from the junction strays from the straight
-    // line between its ends.
-    let bow = |from: f64, to: f64| {
-        let (a, b) = (at(from).point, at(to).point);
-        let steps = ((to - from) / (0.25 * step)).ceil().max(1.0) as usize;
-        (1..steps)
-            .map(|k| {
-                let q = at(from + (to - from) * k as f64 / steps as f64).point;
-                let ab = b - a;
-                let t = ((q - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
-                (q - (a + ab * t)).norm()
-            })
-            .fold(0.0, f64::max)
-    };
     if let Some(d) = search(MAX_BEND, MAX_BEND) {
         // A transition is interpolated from its last ordinary section to the fold: it follows
         // a steady bend (its ends' tangents are the centerline's), not a vessel that bows away
@@ -854,7 +855,7 @@ pub fn clear_transition_length(
         // short of the hairpin (17 mm). Elsewhere the gentle run is kept: it draws a funnel out
         // over more sections (random tree 34, its parent's transition on a steady 69-degree
         // bend cut short: an intima element 0.219 -> 0.176).
-        if bow(estimate, d) <= MAX_TRANSITION_BOW * r {
+        if bow(&at, estimate, d, r / 16.0) <= MAX_TRANSITION_BOW * r {
             return Ok(Some(d));
         }
         if let Some(short) = search(MAX_BEND, MAX_BEND_UNCROSSED) {
