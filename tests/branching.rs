@@ -577,7 +577,8 @@ fn a_transition_stops_short_of_a_hairpin_past_its_junction() {
         let s = |k: usize| from + (to - from) * k as f64 / steps as f64;
         (0..steps).map(|k| branch.at(s(k)).frame.tangent.angle(&branch.at(s(k + 1)).frame.tangent).to_degrees()).sum()
     };
-    let host = meshed.projected.iter().find(|p| meshed.tree.branches[p.branch].name == "branch_2").unwrap();
+    let host = meshed.projected.iter().find(|p| meshed.tree.branches[p.branch].name == "branch_2");
+    let host = host.unwrap_or_else(|| panic!("tree {seed}: no branch_2 (the host vessel past the side branch)"));
     let branch = &meshed.tree.branches[host.branch];
     assert!(matches!(host.start, BranchEnd::Fold(_)), "tree {seed}: branch_2 does not start at a junction");
     let r = branch.at(0.0).radius;
