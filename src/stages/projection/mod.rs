@@ -694,6 +694,29 @@ fn join_ends(
     Ok((out, start, end, dome))
 }
 
+/// Whether every ray of the section at `base` meets the wall from inside within
+/// [`CLEAR_REACH`] of its radius (a ray that runs further has found a neighbouring branch), at
+/// each of [`CLEAR_TURNS`] turns over the O-grid's period: the frames are turned afterwards to
+/// meet the junctions (a quarter turn for a square core, a half turn for a rectangular one), so
+/// the section must be clear whatever the final turn.
+fn rays_clear(setup: &ProjectionSetup, base: CenterlineSample) -> bool {
+    let orient = if setup.normals_outward { 1.0 } else { -1.0 };
+    let period =
+        if setup.template.nx == setup.template.ny { std::f64::consts::FRAC_PI_2 } else { std::f64::consts::PI };
+    let spacing_angle = period / CLEAR_TURNS as f64;
+    (0..CLEAR_TURNS).all(|t| {
+        let phi = spacing_angle * t as f64;
+        let f = base.frame;
+        let normal = f.normal * phi.cos() + f.binormal * phi.sin();
+        let st = CenterlineSample {
+            frame: crate::stages::centerline::Frame::from_tangent_and_hint(f.tangent, normal),
+            ..base
+        };
+        let (probe, sec) = cast_section(setup.template, setup.surface, &st, orient);
+        probe.valid() && sec.surface.iter().all(|p| (p - st.point).norm() <= CLEAR_REACH * st.radius)
+    })
+}
+
 /// How far the centerline (`at`, by distance from a junction) strays between distances `from`
 /// and `to` from the straight line between its points there, sampled every `spacing` or less.
 fn bow(at: &dyn Fn(f64) -> CenterlineSample, from: f64, to: f64, spacing: f64) -> f64 {
@@ -740,8 +763,14 @@ const MAX_BEND_UNCROSSED: f64 = 1.0;
 /// Farthest the centerline between the estimate of a transition's length and its last
 /// ordinary section may stray from the straight line between them, in branch radii: half way
 /// to the wall, a transition interpolated between its ends no longer runs along the vessel.
-/// A steady bend strays little (random tree 34's parent, 69 degrees over two radii: 0.32), a
-/// hairpin far (random tree 73's host, a 123-degree bend on 1.5 radii: 1.47).
+/// It follows a steady bend (its ends' tangents are the centerline's), which strays little
+/// (random tree 34's parent, 69 degrees over two radii: 0.32), not a hairpin, which strays far
+/// (random tree 73's host, a 123-degree bend on 1.5 radii: 1.47; the section found stood 52 mm
+/// past the junction, the transition's sections cut across the bend and 146 elements were
+/// inverted). Past such a bow, the run of sections after the last may stand on the bend at
+/// which ordinary sections do not cross, as anywhere else in a vessel, and the search stops
+/// short of the hairpin (17 mm). Elsewhere the gentle run is kept: it draws a funnel out over
+/// more sections (tree 34's parent cut short: an intima element 0.219 -> 0.176).
 const MAX_TRANSITION_BOW: f64 = 0.5;
 /// Length over which the curvature is measured, in radii.
 const BEND_BASE: f64 = 1.0;
@@ -779,14 +808,7 @@ pub fn clear_transition_length(
     let reach = if sac { len } else { reach };
     let before_far_end = |d: f64| if sac { d <= len } else { d < 0.9 * len };
     let estimate = crate::stages::junction::transition_length(geometry, slot);
-    let orient = if setup.normals_outward { 1.0 } else { -1.0 };
     let at = |d: f64| branch.at(if at_start { d } else { len - d });
-    // The frames are turned afterwards to meet the junctions, so rays are tried at several
-    // turns over the O-grid's period (a quarter turn for a square core, a half turn for a
-    // rectangular one): the section must be clear whatever the final turn.
-    let period =
-        if setup.template.nx == setup.template.ny { std::f64::consts::FRAC_PI_2 } else { std::f64::consts::PI };
-    let spacing_angle = period / CLEAR_TURNS as f64;
     // Ordinary sections are planes across the centerline: where it bends on a radius of
     // curvature near the vessel's radius (it often swings towards the junction centre in its
     // last radius or two), neighbouring sections cross on the inner side of the bend.
@@ -806,21 +828,7 @@ pub fn clear_transition_length(
     };
     let fold_ahead = |d: f64| fold_clearance(d) >= FOLD_MARGIN * r;
     // The geometric test first: it costs nothing next to twelve sets of rays.
-    let clear = |d: f64, max_bend: f64| {
-        let base = at(d);
-        gentle_bend(d, max_bend)
-            && (0..CLEAR_TURNS).all(|t| {
-                let phi = spacing_angle * t as f64;
-                let f = base.frame;
-                let normal = f.normal * phi.cos() + f.binormal * phi.sin();
-                let st = CenterlineSample {
-                    frame: crate::stages::centerline::Frame::from_tangent_and_hint(f.tangent, normal),
-                    ..base
-                };
-                let (probe, sec) = cast_section(setup.template, setup.surface, &st, orient);
-                probe.valid() && sec.surface.iter().all(|p| (p - st.point).norm() <= CLEAR_REACH * st.radius)
-            })
-    };
+    let clear = |d: f64, max_bend: f64| gentle_bend(d, max_bend) && rays_clear(setup, at(d));
     let step = 0.25 * r;
     // The transition runs from the last ordinary section to the fold, so the fold must lie
     // ahead of that section only; the sections past it are ordinary ones and need only be
@@ -846,22 +854,10 @@ pub fn clear_transition_length(
         None
     };
     if let Some(d) = search(MAX_BEND, MAX_BEND) {
-        // A transition is interpolated from its last ordinary section to the fold: it follows
-        // a steady bend (its ends' tangents are the centerline's), not a vessel that bows away
-        // from the line between them, as past a hairpin (random tree 73: 52 mm past a junction,
-        // round a 123-degree bend on 1.5 radii; its sections cut across the bend and 146
-        // elements were inverted). There the run's sections need only the bend at which
-        // ordinary sections do not cross, as anywhere else in a vessel, and the search stops
-        // short of the hairpin (17 mm). Elsewhere the gentle run is kept: it draws a funnel out
-        // over more sections (random tree 34, its parent's transition on a steady 69-degree
-        // bend cut short: an intima element 0.219 -> 0.176).
-        if bow(&at, estimate, d, r / 16.0) <= MAX_TRANSITION_BOW * r {
-            return Ok(Some(d));
-        }
-        if let Some(short) = search(MAX_BEND, MAX_BEND_UNCROSSED) {
-            return Ok(Some(short));
-        }
-        return Ok(Some(d));
+        // Past a hairpin (see MAX_TRANSITION_BOW), the run may bend as ordinary sections do.
+        let past_hairpin = bow(&at, estimate, d, r / 16.0) > MAX_TRANSITION_BOW * r;
+        let short = past_hairpin.then(|| search(MAX_BEND, MAX_BEND_UNCROSSED)).flatten();
+        return Ok(Some(short.unwrap_or(d)));
     }
     // Between two junctions, no clear section in this junction's half: the branch is a bridge.
     if far_junction {
