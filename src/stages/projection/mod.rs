@@ -10,6 +10,7 @@
 //! surface ([`cut`]); otherwise the run stops with the place and the cause.
 
 use crate::data::error::{Error, Result};
+use crate::geometry::mesh::closest_on_segment;
 use crate::geometry::surface::LumenSurface;
 use crate::geometry::vector::smoothstep;
 use crate::stages::centerline::{Branch, CenterlineSample};
@@ -721,13 +722,11 @@ fn rays_clear(setup: &ProjectionSetup, base: CenterlineSample) -> bool {
 /// and `to` from the straight line between its points there, sampled every `spacing` or less.
 fn bow(at: &dyn Fn(f64) -> CenterlineSample, from: f64, to: f64, spacing: f64) -> f64 {
     let (a, b) = (at(from).point, at(to).point);
-    let ab = b - a;
     let samples = ((to - from) / spacing).ceil().max(1.0) as usize;
     (1..samples)
         .map(|k| {
             let q = at(from + (to - from) * k as f64 / samples as f64).point;
-            let t = ((q - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
-            (q - (a + ab * t)).norm()
+            (q - closest_on_segment(&q, &a, &b)).norm()
         })
         .fold(0.0, f64::max)
 }
