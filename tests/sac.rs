@@ -234,3 +234,37 @@ fn a_sac_holding_a_junction_is_its_own_region() {
     }
     assert!(wall[0] > 0 && wall.iter().all(|&n| n == wall[0]), "sac wall elements per layer: {wall:?}");
 }
+
+/// A sac that opens too close to its junction for its dome to close it from the centre of its
+/// largest ball (random tree 46: a sac 15 mm in radius on a vessel of 7.4 mm, whose junction's
+/// fold lies 1.9 mm past that centre) is meshed, its dome's base deeper in the sac: every
+/// element of the sac within the bar, and the sac meshed out to the true dome's tip.
+#[test]
+fn a_sac_opening_against_its_junction_is_closed_by_a_lower_dome() {
+    let tree = common::mesh_random_tree(46, "deep-sac");
+    let meshed = &tree.vessel.meshed;
+    let warnings = &tree.vessel.settings.warnings;
+    assert!(warnings.iter().any(|w| w.kind == "sac_deepened"), "{warnings:?}");
+    let mesh = &meshed.mesh;
+    let sac: Vec<usize> = (0..mesh.hexes.len()).filter(|&e| mesh.sac[e]).collect();
+    assert!(!sac.is_empty(), "no element lies in the sac");
+    let worst = sac.iter().map(|&e| mesh.quality[e].scaled_jacobian).fold(f64::INFINITY, f64::min);
+    assert!(worst >= 0.2, "the sac's worst scaled Jacobian is {worst}");
+    let min_sj = mesh.quality.iter().map(|q| q.scaled_jacobian).fold(f64::INFINITY, f64::min);
+    assert!(min_sj >= 0.2, "the tree's minimum scaled Jacobian is {min_sj}");
+    let aneurysm = &tree.truth["aneurysms"][0];
+    let point = |v: &serde_json::Value| {
+        nalgebra::Point3::new(v[0].as_f64().unwrap(), v[1].as_f64().unwrap(), v[2].as_f64().unwrap())
+    };
+    let (tip, radius) = (point(&aneurysm["dome_tip"]), aneurysm["sac_radius_mm"].as_f64().unwrap());
+    let nearest = sac
+        .iter()
+        .flat_map(|&e| mesh.hexes[e].iter())
+        .map(|&n| (mesh.nodes[n as usize] - tip).norm())
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        nearest <= 0.1 * radius,
+        "the sac's mesh stops {nearest:.3} mm short of the dome's tip (radius {radius:.3} mm)"
+    );
+    let _ = std::fs::remove_dir_all(&tree.dir);
+}

@@ -163,7 +163,10 @@ pub(crate) fn mesh_dropping_what_fails(
         // without the one that fails (or all), and each left out is said not meshed (a warning,
         // report.json's ends, exit 3).
         Err(e) if extracted && !tree_config.centerline.sacs_mm.is_empty() => {
-            mesh_leaving_out_sacs(surface, index, centerlines, tree_config, &e, warnings, progress)?
+            match mesh_deepened_sac(surface, index, &centerlines, tree_config, &e, progress) {
+                Some(deepened) => deepened,
+                None => mesh_leaving_out_sacs(surface, index, centerlines, tree_config, &e, warnings, progress)?,
+            }
         }
         // A branch found on the surface that ends too close to its junction for the junction's
         // transition (a short capped stub in an aorto-iliac's crotch) does not cost the rest: the
@@ -179,6 +182,89 @@ pub(crate) fn mesh_dropping_what_fails(
         Err(e) => return Err(name_winding(e, surface)),
     };
     Ok((meshed, centerlines, short_branches))
+}
+
+/// How far past the centre of a sac's largest ball (radius R) its dome's base may stand, in R,
+/// when the sac opens too close to its junction for it to stand at the centre. There the dome
+/// closing the sac is a hemisphere; at this depth it is 0.58 as tall as it is wide, and the
+/// section's rim meets the sac's wall at 60 degrees (a ball's wall a chord of depth d from its
+/// centre meets at acos(d / R)), the ring cells at the wall sheared by 30 degrees at most.
+const SAC_DEEPENING: f64 = 0.5;
+
+/// The vessel refused (`refusal`) because a sac opens too close to its junction (no section of
+/// its branch between the junction's folded end and the centre of the sac's largest ball is
+/// clear; see `Error::ShortBranch`), meshed with that sac's path run on past the ball's centre
+/// ([`deepen_path`]), so that its last section may stand in the sac and a lower dome close it
+/// (random trees 30 and 46: the fold's wall lay 0.15 and 1.9 mm ahead of the ball's centre, a
+/// quarter of a radius needed). `None` when the refusal is another, or the vessel is refused so
+/// too. Returns the mesh and its centerlines.
+fn mesh_deepened_sac(
+    surface: &TriangleSurface,
+    index: Option<&LumenSurface>,
+    centerlines: &Centerlines,
+    tree_config: &MeshConfig,
+    refusal: &Error,
+    progress: &mut Progress,
+) -> Option<(Meshed, Centerlines)> {
+    let Error::ShortBranch { end_mm, .. } = refusal else { return None };
+    let lines = &centerlines.polylines;
+    let end = Point3::from(*end_mm);
+    let gap = |k: usize| lines[k].points.last().map_or(f64::INFINITY, |q| (q - end).norm());
+    let k = (0..lines.len()).min_by(|&a, &b| gap(a).total_cmp(&gap(b)))?;
+    let radius = *lines[k].radii.as_ref()?.last()?;
+    // The refusal names a sac's path only when a sac point lies within its end's ball.
+    let is_sac = tree_config.centerline.sacs_mm.iter().any(|p| (Point3::from(*p) - end).norm() <= radius);
+    if gap(k) > 1e-9 * radius.max(1.0) || !is_sac {
+        return None;
+    }
+    let mut deepened = centerlines.clone();
+    deepen_path(&mut deepened.polylines[k], SAC_DEEPENING * radius);
+    let mut meshed = mesh_vessel_on(surface, index, &deepened, tree_config, progress).ok()?;
+    meshed.notes.push(Warning::new(
+        "sac_deepened",
+        format!(
+            "the sac at ({:.3}, {:.3}, {:.3}) mm opens too close to its junction for its dome to close it from the \
+         centre of its largest ball: the dome's base stands up to {:.3} mm further in, and a lower dome closes it",
+            end.x,
+            end.y,
+            end.z,
+            SAC_DEEPENING * radius
+        ),
+    ));
+    Some((meshed, deepened))
+}
+
+/// Runs a path on `depth` past its last point, straight along its direction over the last
+/// ball's radius there (the path reaches the ball's centre through its neck), inside the ball:
+/// each point's radius is the ball's half-chord there, sqrt(R^2 - d^2). Points every eighth of
+/// the radius.
+fn deepen_path(path: &mut crate::io::input::CenterlinePolyline, depth: f64) {
+    let (Some(&last), Some(radius)) = (path.points.last(), path.radii.as_ref().and_then(|r| r.last().copied())) else {
+        return;
+    };
+    // The direction from the first point a radius back along the path (or the first point).
+    let mut back = path.points[0];
+    let mut run = 0.0;
+    for w in path.points.windows(2).rev() {
+        run += (w[1] - w[0]).norm();
+        back = w[0];
+        if run >= radius {
+            break;
+        }
+    }
+    let Some(direction) = (last - back).try_normalize(1e-12) else { return };
+    let steps = (8.0 * depth / radius).ceil().max(1.0) as usize;
+    for i in 1..=steps {
+        let d = depth * i as f64 / steps as f64;
+        path.points.push(last + direction * d);
+        if let Some(radii) = path.radii.as_mut() {
+            radii.push((radius * radius - d * d).max(0.0).sqrt());
+        }
+        if let Some(normals) = path.normals.as_mut() {
+            let n = *normals.last().expect("a normal per point");
+            normals.push(n);
+        }
+    }
 }
 
 /// The vessel refused (`refusal`) with the sacs the extraction found, meshed without them: of
