@@ -266,8 +266,9 @@ fn deepen_path(path: &mut crate::io::input::CenterlinePolyline, depth: f64) {
             radii.push((radius * radius - d * d).max(0.0).sqrt());
         }
         if let Some(normals) = path.normals.as_mut() {
-            let n = *normals.last().expect("a normal per point");
-            normals.push(n);
+            if let Some(&n) = normals.last() {
+                normals.push(n);
+            }
         }
     }
 }
