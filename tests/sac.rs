@@ -236,9 +236,10 @@ fn a_sac_holding_a_junction_is_its_own_region() {
 }
 
 /// A sac that opens too close to its junction for its dome to close it from the centre of its
-/// largest ball (random tree 46: a sac 15 mm in radius on a vessel of 7.4 mm, whose junction's
-/// fold lies 1.9 mm past that centre) is meshed, its dome's base deeper in the sac: every
-/// element of the sac within the bar, and the sac meshed out to the true dome's tip.
+/// largest ball (random tree 46: a sac 15 mm in radius on a neck of 7.4 mm, where no section
+/// between the junction's transition and that centre leaves the fold's wall the quarter radius
+/// ahead that it needs) is meshed, its dome's base deeper in the sac: every element of the sac
+/// within the bar, and the sac meshed out to the true dome's tip.
 #[test]
 fn a_sac_opening_against_its_junction_is_closed_by_a_lower_dome() {
     let tree = common::mesh_random_tree(46, "deep-sac");

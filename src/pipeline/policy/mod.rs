@@ -212,14 +212,12 @@ fn mesh_deepened_sac(
     progress: &mut Progress,
 ) -> Option<(Meshed, Centerlines)> {
     let Error::ShortBranch { end_mm, .. } = refusal else { return None };
-    let lines = &centerlines.polylines;
     let end = Point3::from(*end_mm);
-    let gap = |k: usize| lines[k].points.last().map_or(f64::INFINITY, |q| (q - end).norm());
-    let k = (0..lines.len()).min_by(|&a, &b| gap(a).total_cmp(&gap(b)))?;
-    let radius = *lines[k].radii.as_ref()?.last()?;
+    let (k, gap) = path_to(centerlines, end_mm)?;
+    let radius = *centerlines.polylines[k].radii.as_ref()?.last()?;
     // The refusal names a sac's path only when a sac point lies within its end's ball.
     let is_sac = tree_config.centerline.sacs_mm.iter().any(|p| (Point3::from(*p) - end).norm() <= radius);
-    if gap(k) > radius || !is_sac {
+    if gap > radius || !is_sac {
         return None;
     }
     let mut deepened = centerlines.clone();
@@ -570,13 +568,19 @@ pub(super) fn merged_tree(
     }
 }
 
+/// The polyline whose last point lies nearest `point` (the extraction's paths end at their
+/// ends' centres; the first of equals), and that distance.
+fn path_to(centerlines: &Centerlines, point: &[f64; 3]) -> Option<(usize, f64)> {
+    let p = Point3::from(*point);
+    let gap = |k: usize| centerlines.polylines[k].points.last().map_or(f64::INFINITY, |q| (q - p).norm());
+    (0..centerlines.polylines.len()).min_by(|&a, &b| gap(a).total_cmp(&gap(b))).map(|k| (k, gap(k)))
+}
+
 /// The centerlines without the paths to `points`: for each point, the polyline whose last point
 /// lies nearest it (the extraction's paths end at their ends' centres).
 pub(super) fn without_paths_to(centerlines: &Centerlines, points: &[[f64; 3]]) -> Centerlines {
     let lines = &centerlines.polylines;
-    let gap = |k: usize, p: &[f64; 3]| lines[k].points.last().map_or(f64::INFINITY, |q| (q - Point3::from(*p)).norm());
-    let dropped: Vec<usize> =
-        points.iter().filter_map(|p| (0..lines.len()).min_by(|&a, &b| gap(a, p).total_cmp(&gap(b, p)))).collect();
+    let dropped: Vec<usize> = points.iter().filter_map(|p| path_to(centerlines, p).map(|(k, _)| k)).collect();
     Centerlines {
         polylines: (0..lines.len()).filter(|k| !dropped.contains(k)).map(|k| lines[k].clone()).collect(),
         source: centerlines.source.clone(),
