@@ -133,6 +133,24 @@ pub fn find_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: Option<
             caps.push((r[0], cap));
         }
     }
+    // Then a cap with no point inside its rim (a fan of slivers, an ear-clipped polygon: what
+    // hole-filling tools leave), whose triangles may crease one another where the rim is not
+    // quite planar, and whose rim may turn by less than a cut's where the cut is oblique: the
+    // triangles with every corner on a sharp edge, a wall triangle beside the rim having a
+    // corner off it (see [`RegionSurface::corners_off_creases`]).
+    // Its rim is sharp all round and it has no point inside (a patch of a rough wall whose
+    // corners all lie on creases has either a softer edge or a point inside).
+    let mut off_rim = surface.corners_off_creases(triangles);
+    off_rim.iter_mut().zip(&taken).for_each(|(off, &t)| *off |= t);
+    for (r, sharp) in candidates(surface.regions(&off_rim, |_, _, _| true)) {
+        if !sharp || !every_corner_on_its_rim(triangles, &r) {
+            continue;
+        }
+        if let Some(cap) = disc(&r, None, true, Flatness::AsItsRim) {
+            r.iter().for_each(|&t| taken[t as usize] = true);
+            caps.push((r[0], cap));
+        }
+    }
     // Then planar regions (a blunt end's face, its rim rounded), among the triangles left.
     for (r, sharp) in candidates(surface.regions(&taken, |seed, _, u| surface.planar_with(seed, u))) {
         caps.extend(disc(&r, None, sharp, Flatness::Plane).map(|cap| (r[0], cap)));
@@ -140,6 +158,13 @@ pub fn find_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: Option<
     // In the order of their first triangles, whichever way each was found.
     caps.sort_by_key(|(first, _)| *first);
     caps.into_iter().map(|(_, cap)| cap).collect()
+}
+
+/// Whether the region's triangles have every corner on its boundary (one loop, or none).
+fn every_corner_on_its_rim(triangles: &[[u32; 3]], region: &[u32]) -> bool {
+    let tris: Vec<[u32; 3]> = region.iter().map(|&t| triangles[t as usize]).collect();
+    let rim: std::collections::HashSet<u32> = boundary_loops(&tris).into_iter().flatten().collect();
+    tris.iter().flatten().all(|v| rim.contains(v))
 }
 
 fn unit_normal(vertices: &[Point3<f64>], t: &[u32; 3]) -> Vector3<f64> {
@@ -170,6 +195,24 @@ impl RegionSurface {
     fn smooth_edge(&self, t: usize, u: usize) -> bool {
         let (a, b) = (self.normals[t], self.normals[u]);
         a == Vector3::zeros() || b == Vector3::zeros() || a.dot(&b) > CUT_RIM_COS
+    }
+
+    /// Whether each triangle has a corner on no sharp edge (one turning by more than 30
+    /// degrees, see [`RIM_COS`]). A cap triangulated without points inside has every corner on
+    /// its rim, which is sharp; the wall's triangles beside the rim reach off it into the
+    /// smooth wall, so they do not join the cap.
+    fn corners_off_creases(&self, triangles: &[[u32; 3]]) -> Vec<bool> {
+        let vertices = triangles.iter().flatten().map(|&v| v as usize + 1).max().unwrap_or(0);
+        let mut on_crease = vec![false; vertices];
+        for (t, tri) in triangles.iter().enumerate() {
+            for (k, &u) in self.neighbours[t].iter().enumerate() {
+                if u < NON_MANIFOLD && self.normals[t].dot(&self.normals[u as usize]) < RIM_COS {
+                    on_crease[tri[k] as usize] = true;
+                    on_crease[tri[(k + 1) % 3] as usize] = true;
+                }
+            }
+        }
+        triangles.iter().map(|tri| tri.iter().any(|&v| !on_crease[v as usize])).collect()
     }
 
     /// Regions grown across manifold edges from each triangle neither taken nor yet in a region
@@ -465,6 +508,74 @@ mod tests {
     fn a_cap_whose_rim_strays_far_from_a_plane_is_not_a_flat_cap() {
         // A rim 30 % of the radius off its plane closes a vessel with a saddle, not a flat cap.
         let (vertices, triangles, _) = tube_with_ring_caps(0.3);
+        let caps = find_caps(&vertices, &triangles, None);
+        assert_eq!(caps.len(), 1, "{caps:?}");
+        assert!((caps[0].end.centre.z - 4.0).abs() < 1e-9);
+    }
+
+    /// A tube of radius 1 along z up to 4, 32 points round, cut at its foot by a plane leaning
+    /// `tilt` (its slope) and waved by `wave` (a fraction of the radius), both ends closed by
+    /// fans of slivers from their rims' first points, as hole-filling tools close a hole (no
+    /// point inside the rim); the foot's fan is the last triangles, how many returned.
+    fn tube_with_fan_caps(tilt: f64, wave: f64) -> (Vec<Point3<f64>>, Vec<[u32; 3]>, usize) {
+        let (around, along) = (32u32, 10u32);
+        let angle = |i: u32| std::f64::consts::TAU * i as f64 / around as f64;
+        let mut vertices = vec![];
+        for j in 0..=along {
+            let s = j as f64 / along as f64;
+            for i in 0..around {
+                let foot = tilt * angle(i).cos() + wave * (3.0 * angle(i)).sin();
+                vertices.push(Point3::new(angle(i).cos(), angle(i).sin(), (1.0 - s) * foot + 4.0 * s));
+            }
+        }
+        let at = |j: u32, i: u32| j * around + i % around;
+        let mut triangles = vec![];
+        for j in 0..along {
+            for i in 0..around {
+                triangles.push([at(j, i), at(j, i + 1), at(j + 1, i + 1)]);
+                triangles.push([at(j, i), at(j + 1, i + 1), at(j + 1, i)]);
+            }
+        }
+        triangles.extend((1..around - 1).map(|i| [at(along, 0), at(along, i), at(along, i + 1)]));
+        let foot: Vec<[u32; 3]> = (1..around - 1).map(|i| [at(0, 0), at(0, i + 1), at(0, i)]).collect();
+        let fan = foot.len();
+        triangles.extend(foot);
+        (vertices, triangles, fan)
+    }
+
+    #[test]
+    fn a_fan_of_slivers_across_an_oblique_rim_that_is_not_quite_planar_is_one_cap() {
+        // Cut 35 degrees off square, the rim turns by 55 degrees on one side, less than a cut
+        // cap's rim (60), so its region runs into the wall; waved by 4 % of the radius, the
+        // slivers lean more than a planar region's 2 degrees from one another.
+        let (vertices, triangles, fan) = tube_with_fan_caps(35f64.to_radians().tan(), 0.04);
+        let surface = RegionSurface::new(&vertices, &triangles);
+        let foot = triangles.len() - fan..triangles.len();
+        let turns = |t: usize| surface.neighbours[t].map(|u| surface.normals[t].dot(&surface.normals[u as usize]));
+        let rim_turns: Vec<f64> = foot
+            .clone()
+            .flat_map(|t| {
+                surface.neighbours[t]
+                    .into_iter()
+                    .zip(turns(t))
+                    .filter(|(u, _)| !foot.contains(&(*u as usize)))
+                    .map(|(_, c)| c)
+            })
+            .collect();
+        assert!(rim_turns.iter().any(|&c| c > CUT_RIM_COS), "a rim edge turns by less than 60 degrees");
+        assert!(rim_turns.iter().all(|&c| c < RIM_COS), "every rim edge turns by more than 30 degrees");
+        let planar = foot.clone().all(|t| surface.normals[t].dot(&surface.normals[foot.start]) > REGION_COS);
+        assert!(!planar, "the slivers are not within 2 degrees of one plane");
+        let caps = find_caps(&vertices, &triangles, None);
+        assert_eq!(caps.len(), 2, "{caps:?}");
+        let cap = caps.iter().find(|c| c.end.centre.z < 2.0).expect("the foot's fan is a cap");
+        assert_eq!(cap.triangles.len(), fan);
+        assert!(cap.sharp_rim);
+        let rim: Vec<u32> = (0..32).collect();
+        let (centre, _) = loop_centre_and_area(&vertices, &rim);
+        assert!((cap.end.centre - centre).norm() < 1e-9, "the cap's end at its rim's centre");
+        // A rim 30 % off its plane, fanned, is no flat cap.
+        let (vertices, triangles, _) = tube_with_fan_caps(0.0, 0.3);
         let caps = find_caps(&vertices, &triangles, None);
         assert_eq!(caps.len(), 1, "{caps:?}");
         assert!((caps[0].end.centre.z - 4.0).abs() < 1e-9);
