@@ -136,13 +136,13 @@ pub fn find_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: Option<
     // Then a cap with no point inside its rim (a fan of slivers, an ear-clipped polygon: what
     // hole-filling tools leave), whose triangles may crease one another where the rim is not
     // quite planar, and whose rim may turn by less than a cut's where the cut is oblique: the
-    // triangles with every corner on a sharp edge, a wall triangle beside the rim having a
-    // corner off it (see [`RegionSurface::corners_off_creases`]).
-    // Its rim is sharp all round and it has no point inside (a patch of a rough wall whose
-    // corners all lie on creases has either a softer edge or a point inside).
-    let mut off_rim = surface.corners_off_creases(triangles);
-    off_rim.iter_mut().zip(&taken).for_each(|(off, &t)| *off |= t);
-    for (r, sharp) in candidates(surface.regions(&off_rim, |_, _, _| true)) {
+    // triangles with every corner on a sharp edge (a wall triangle beside the rim has a corner
+    // off it, see [`RegionSurface::corners_off_creases`]), kept when the rim is sharp all round
+    // and no corner lies inside it (a patch of a rough wall whose corners all lie on creases
+    // has a softer edge or a point inside).
+    let mut excluded = surface.corners_off_creases(triangles);
+    excluded.iter_mut().zip(&taken).for_each(|(off, &t)| *off |= t);
+    for (r, sharp) in candidates(surface.regions(&excluded, |_, _, _| true)) {
         if !sharp || !every_corner_on_its_rim(triangles, &r) {
             continue;
         }
