@@ -326,9 +326,9 @@ fn refuse_non_manifold(surface: &TriangleSurface) -> Result<()> {
 }
 
 /// Whether the surface is a voxel staircase: its steps crease it all over
-/// ([`STAIRCASE_CREASES`]), convex and concave alike ([`STAIRCASE_CONCAVE`]). Both are needed: a coarse polygonal tube is creased at its caps'
-/// rims, convex; a coarse real surface is creased convex around its tubes; a smooth surface is
-/// creased nowhere. Neither figure depends on the surface's orientation in space, its unit or
+/// ([`STAIRCASE_CREASES`]), convex and concave alike ([`STAIRCASE_CONCAVE`]). Both are needed:
+/// a coarse polygonal tube is creased at its caps' rims, convex; a coarse real surface is
+/// creased convex around its tubes; a smooth surface is creased nowhere. Neither figure depends on the surface's orientation in space, its unit or
 /// a little noise (an earlier test, most of the area facing a dozen directions, missed the voxel
 /// aorta written with noise or decimated, and depended on the axes).
 fn is_staircase(surface: &TriangleSurface) -> bool {
