@@ -328,12 +328,12 @@ fn refuse_non_manifold(surface: &TriangleSurface) -> Result<()> {
 /// Whether the surface is a voxel staircase: its steps crease it all over
 /// ([`STAIRCASE_CREASES`]), convex and concave alike ([`STAIRCASE_CONCAVE`]). Both are needed:
 /// a coarse polygonal tube is creased at its caps' rims, convex; a coarse real surface is
-/// creased convex around its tubes; a smooth surface is creased nowhere. Neither figure depends on the surface's orientation in space, its unit or
-/// a little noise (an earlier test, most of the area facing a dozen directions, missed the voxel
-/// aorta written with noise or decimated, and depended on the axes).
+/// creased convex around its tubes; a smooth surface is creased nowhere. Neither figure depends
+/// on the surface's orientation in space, its unit or a little noise (an earlier test, most of
+/// the area facing a dozen directions, missed the voxel aorta written with noise or decimated,
+/// and depended on the axes).
 fn is_staircase(surface: &TriangleSurface) -> bool {
-    let normals: Vec<Vector3<f64>> = surface.triangles.iter().map(|t| area_vector(&surface.vertices, t)).collect();
-    let creases = creases(surface, &normals);
+    let creases = creases(surface);
     creases.share >= STAIRCASE_CREASES && creases.concave >= STAIRCASE_CONCAVE
 }
 
@@ -351,8 +351,9 @@ struct Creases {
 }
 
 /// The surface's creases ([`Creases`]), its triangles wound outward.
-fn creases(surface: &TriangleSurface, area_vectors: &[Vector3<f64>]) -> Creases {
+fn creases(surface: &TriangleSurface) -> Creases {
     let v = &surface.vertices;
+    let area_vectors: Vec<Vector3<f64>> = surface.triangles.iter().map(|t| area_vector(v, t)).collect();
     let neighbours = triangle_neighbours(&surface.triangles);
     let (mut creased, mut concave, mut total) = (0.0, 0.0, 0.0);
     for (t, tri) in surface.triangles.iter().enumerate() {
@@ -501,11 +502,7 @@ mod tests {
     #[test]
     fn a_voxel_staircase_is_found_however_it_lies_and_a_coarse_prism_is_not() {
         let tube = cuberille_tube(6.3, 30);
-        let figures = |s: &TriangleSurface| {
-            let normals: Vec<Vector3<f64>> = s.triangles.iter().map(|t| area_vector(&s.vertices, t)).collect();
-            creases(s, &normals)
-        };
-        let steps = figures(&tube);
+        let steps = creases(&tube);
         assert!(
             steps.share >= STAIRCASE_CREASES && steps.concave >= STAIRCASE_CONCAVE,
             "{:.3} {:.3}",
@@ -526,7 +523,7 @@ mod tests {
         assert!(is_staircase(&surface(moved, tube.triangles.clone())));
         // A ten-sided prism is creased along every edge around it (36 degrees), all convex.
         let coarse = prism(10, 5.0, 30.0);
-        let facets = figures(&coarse);
+        let facets = creases(&coarse);
         assert!(
             facets.share > 3.0 * STAIRCASE_CREASES && facets.concave == 0.0,
             "{:.3} {:.3}",
@@ -535,7 +532,7 @@ mod tests {
         );
         assert!(!is_staircase(&coarse));
         // Finely faceted (a hundred sides), it is creased only at its caps' rims.
-        assert!(figures(&prism(100, 5.0, 30.0)).share < STAIRCASE_CREASES);
+        assert!(creases(&prism(100, 5.0, 30.0)).share < STAIRCASE_CREASES);
     }
 
     /// Taubin's smoothing takes a staircase's steps off without shrinking it: the creases all
@@ -550,8 +547,7 @@ mod tests {
         };
         let before = mean_radius(&tube);
         taubin(&mut tube);
-        let normals: Vec<Vector3<f64>> = tube.triangles.iter().map(|t| area_vector(&tube.vertices, t)).collect();
-        assert!(creases(&tube, &normals).share < 0.5 * STAIRCASE_CREASES);
+        assert!(creases(&tube).share < 0.5 * STAIRCASE_CREASES);
         let after = mean_radius(&tube);
         assert!((after / before - 1.0).abs() < 0.05, "mean radius {before:.3} -> {after:.3}");
     }

@@ -140,7 +140,7 @@ pub fn find_caps(vertices: &[Point3<f64>], triangles: &[[u32; 3]], tags: Option<
     // off it, see [`RegionSurface::corners_off_creases`]), kept when the rim is sharp all round
     // and no corner lies inside it (a patch of a rough wall whose corners all lie on creases
     // has a softer edge or a point inside).
-    let mut excluded = surface.corners_off_creases(triangles);
+    let mut excluded = surface.corners_off_creases(vertices.len(), triangles);
     excluded.iter_mut().zip(&taken).for_each(|(off, &t)| *off |= t);
     for (r, sharp) in candidates(surface.regions(&excluded, |_, _, _| true)) {
         if !sharp || !every_corner_on_its_rim(triangles, &r) {
@@ -201,8 +201,7 @@ impl RegionSurface {
     /// degrees, see [`RIM_COS`]). A cap triangulated without points inside has every corner on
     /// its rim, which is sharp; the wall's triangles beside the rim reach off it into the
     /// smooth wall, so they do not join the cap.
-    fn corners_off_creases(&self, triangles: &[[u32; 3]]) -> Vec<bool> {
-        let vertices = triangles.iter().flatten().map(|&v| v as usize + 1).max().unwrap_or(0);
+    fn corners_off_creases(&self, vertices: usize, triangles: &[[u32; 3]]) -> Vec<bool> {
         let mut on_crease = vec![false; vertices];
         for (t, tri) in triangles.iter().enumerate() {
             for (k, &u) in self.neighbours[t].iter().enumerate() {
