@@ -854,8 +854,16 @@ pub fn clear_transition_length(
     };
     if let Some(d) = search(MAX_BEND, MAX_BEND) {
         // Past a hairpin (see MAX_TRANSITION_BOW), the run may bend as ordinary sections do.
-        let past_hairpin = bow(&at, estimate, d, r / 16.0) > MAX_TRANSITION_BOW * r;
-        let short = past_hairpin.then(|| search(MAX_BEND, MAX_BEND_UNCROSSED)).flatten();
+        let unbowed = |x: &f64| bow(&at, estimate, *x, r / 16.0) <= MAX_TRANSITION_BOW * r;
+        let short = (!unbowed(&d)).then(|| search(MAX_BEND, MAX_BEND_UNCROSSED)).flatten();
+        // Still past the hairpin (it begins a radius or two from the junction, before any section
+        // on a gentle bend): the last section itself may stand on a bend of one vessel radius,
+        // where ordinary sections do not cross, short of the hairpin, rather than past it with
+        // the transition cut across the bend (random tree 1189).
+        let short = match short {
+            Some(x) if !unbowed(&x) => search(MAX_BEND_UNCROSSED, MAX_BEND_UNCROSSED).filter(unbowed).or(short),
+            _ => short,
+        };
         return Ok(Some(short.unwrap_or(d)));
     }
     // Between two junctions, no clear section in this junction's half: the branch is a bridge.
