@@ -338,19 +338,7 @@ pub(super) fn mesh_vessel_laid_out(
     };
     let coarser = coarser_junctions(config, centerlines);
     let Some(overlap) = overlap else {
-        let close_merges = tree.close_merges.clone();
-        let meshed =
-            mesh_tree_recentred(surface, lumen_surface, tree, centerlines, config, &close_merges, policy, progress);
-        let (Err(Error::Geometry(refusal)), Some(coarser)) = (&meshed, coarser) else { return meshed };
-        let tree = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))?;
-        let mut retried =
-            mesh_tree_recentred(surface, lumen_surface, tree, centerlines, &coarser, &close_merges, policy, progress)
-                .map_err(|_| Error::Geometry(refusal.clone()))?;
-        retried.notes.push(junction_spacing_note(
-            config,
-            &format!("at {} they were refused: {refusal}", config.lumen.axial_spacing),
-        ));
-        return Ok(retried);
+        return mesh_unmerged(surface, lumen_surface, tree, centerlines, config, policy, progress);
     };
     // Two junctions overlap: they become one, centred on the branch between them. Where along
     // it depends on the branches around (the middle of the merged junction is neither end), so
@@ -392,9 +380,22 @@ pub(super) fn mesh_vessel_laid_out(
             Ok(meshed)
         }
         (None, Some(e)) => {
+            if let Some(apart) = overlap_apart(surface, lumen_surface, centerlines, config, policy, progress) {
+                let mut meshed = apart;
+                meshed.notes.push(Warning::new(
+                    "junctions_overlap",
+                    format!(
+                        "{} were predicted to overlap (a crotch of one reaches past the other's centre), yet \
+                         merged into one junction they were refused at every place tried ({e}); they are meshed \
+                         apart, and their elements judged as any",
+                        overlap.place
+                    ),
+                ));
+                return Ok(meshed);
+            }
             let tried = format!(
                 "(vesselhex merged {} into one junction there, as their blocks would overlap, and tried centring it \
-                 {} of the way along the branch between them; none meshed)",
+                 {} of the way along the branch between them; none meshed, nor did meshing them apart)",
                 overlap.place,
                 MERGED_CENTRE_AT.map(|a| a.to_string()).join(", ")
             );
@@ -407,6 +408,56 @@ pub(super) fn mesh_vessel_laid_out(
         }
         (None, None) => unreachable!("every place was tried"),
     }
+}
+
+/// The tree meshed as built, its junctions merged only for lying close ([`mesh_tree_recentred`]);
+/// one refused for its geometry is meshed again with its junctions spaced as at the coarse
+/// preset ([`coarser_junctions`]), where that differs.
+fn mesh_unmerged(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    tree: CenterlineTree,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    policy: &LayoutPolicy,
+    progress: &mut Progress,
+) -> Result<Meshed> {
+    let close_merges = tree.close_merges.clone();
+    let meshed =
+        mesh_tree_recentred(surface, lumen_surface, tree, centerlines, config, &close_merges, policy, progress);
+    let (Err(Error::Geometry(refusal)), Some(coarser)) = (&meshed, coarser_junctions(config, centerlines)) else {
+        return meshed;
+    };
+    let tree = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))?;
+    let mut retried =
+        mesh_tree_recentred(surface, lumen_surface, tree, centerlines, &coarser, &close_merges, policy, progress)
+            .map_err(|_| Error::Geometry(refusal.clone()))?;
+    retried.notes.push(junction_spacing_note(
+        config,
+        &format!("at {} they were refused: {refusal}", config.lumen.axial_spacing),
+    ));
+    Ok(retried)
+}
+
+/// Two junctions predicted to overlap, whose merged junction was refused at every place,
+/// meshed apart: the prediction (a crotch of one reaching past the other's centre, see
+/// `junction::check_junction_spacing`) says their blocks may invert, the elements say whether
+/// they do. Random trees 1011 and 1019 (of the unseen seeds) were refused merged at every place
+/// and meet every bar apart. Only refused vessels take this path: none that meshed changes.
+/// None when apart is refused too.
+fn overlap_apart(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    policy: &LayoutPolicy,
+    progress: &mut Progress,
+) -> Option<Meshed> {
+    let apart_policy = policy.meshing_overlaps();
+    let meshed = CenterlineTree::build(centerlines, &config.centerline, Some(lumen_surface))
+        .and_then(|tree| mesh_unmerged(surface, lumen_surface, tree, centerlines, config, &apart_policy, progress));
+    policy.sectors_differ.set(policy.sectors_differ.get() || apart_policy.sectors_differ.get());
+    meshed.ok()
 }
 
 /// The vessel meshed (`mesh_at`) with its merged junctions centred at each place of

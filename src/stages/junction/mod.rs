@@ -57,6 +57,10 @@ pub struct LayoutPolicy {
     /// Set, with `sectors` off, when a junction of four or more branches has a sector layout,
     /// or a book was refused: meshing again with sectors allowed gives another mesh.
     pub sectors_differ: std::cell::Cell<bool>,
+    /// Two junctions whose blocks are predicted to overlap (see [`check_junction_spacing`]) are
+    /// meshed apart all the same, their elements judged as any: set only after the two merged
+    /// into one were refused at every place.
+    pub overlaps_meshed: bool,
 }
 
 impl LayoutPolicy {
@@ -66,6 +70,11 @@ impl LayoutPolicy {
 
     pub fn with_sectors() -> Self {
         LayoutPolicy { sectors: true, ..LayoutPolicy::default() }
+    }
+
+    /// This policy with overlapping junctions meshed apart (see `overlaps_meshed`).
+    pub fn meshing_overlaps(&self) -> Self {
+        LayoutPolicy { sectors: self.sectors, sectors_differ: self.sectors_differ.clone(), overlaps_meshed: true }
     }
 }
 

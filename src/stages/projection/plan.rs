@@ -170,7 +170,9 @@ pub fn project_tree(
 ) -> Result<ProjectedTree> {
     let l = &config.lumen;
     let mut junctions = analyse_junctions(tree, lumen_surface, policy)?;
-    check_junction_spacing(tree, &junctions, lumen_surface)?;
+    if !policy.overlaps_meshed {
+        check_junction_spacing(tree, &junctions, lumen_surface)?;
+    }
     if !junctions.is_empty() && !l.core_elements.is_multiple_of(2) {
         return Err(Error::Config(format!(
             "lumen.core_elements = {} is odd: a branching vessel needs an even number (the junction's spine runs \
