@@ -336,10 +336,10 @@ pub(super) fn mesh_vessel_laid_out(
             .or_else(|| find_junction_overlap(&tree, &junctions, lumen_surface)),
         Err(e) => Some(unanalysable_close_junction(&tree, lumen_surface).ok_or(e)?),
     };
-    let coarser = coarser_junctions(config, centerlines);
     let Some(overlap) = overlap else {
         return mesh_unmerged(surface, lumen_surface, tree, centerlines, config, policy, progress);
     };
+    let coarser = coarser_junctions(config, centerlines);
     // Two junctions overlap: they become one, centred on the branch between them. Where along
     // it depends on the branches around (the middle of the merged junction is neither end), so
     // each place of MERGED_CENTRE_AT is meshed and the best mesh kept (judged as a junction's
@@ -380,8 +380,7 @@ pub(super) fn mesh_vessel_laid_out(
             Ok(meshed)
         }
         (None, Some(e)) => {
-            if let Some(apart) = overlap_apart(surface, lumen_surface, centerlines, config, policy, progress) {
-                let mut meshed = apart;
+            if let Some(mut meshed) = overlap_apart(surface, lumen_surface, centerlines, config, policy, progress) {
                 meshed.notes.push(Warning::new(
                     "junctions_overlap",
                     format!(
