@@ -175,7 +175,7 @@ adventitia) grown from the lumen surface along its normal (or along the rays), w
 Parameters come from the preset, then the case file (--config, TOML), then these flags. Case-file keys (docs/guide/case-file.md):
   preset, units, output_units, formats
   [centerline] resample_step, smoothing_passes, radius_smoothing_passes, trim_inlet, trim_outlet,
-               junction_merge_radii, inlet_mm, sacs_mm, loop_cuts_mm
+               junction_merge_radii, split_fused_daughters, inlet_mm, sacs_mm, loop_cuts_mm
   [lumen] core_elements, core_size, radial_elements, growth_ratio, first_cell_height, axial_spacing,
           axial_spacing_mm, junction_axial_spacing, ray_reach
   [wall] thickness_ratio, thickness_mm, growth, surface, surfaces; [wall.intima] / [wall.media] /

@@ -646,3 +646,22 @@ fn junctions_predicted_to_overlap_are_meshed_apart_when_merged_they_are_refused(
     assert!(overlap.message.contains("meshed apart"), "tree {seed}: {}", overlap.message);
     let _ = std::fs::remove_dir_all(&tree.dir);
 }
+
+/// Random tree 156 (17 ends): the daughters of one of its bifurcations (branch_21 dividing
+/// into branch_23 and branch_24) leave with their lumens still fused past where the junction's
+/// transitions end, and the tree was refused there, elements inverted, as a book, merged and
+/// apart. Meshed again with such pairs on a trunk of their own to where their lumens part
+/// (`centerline.split_fused_daughters`: the junction stands where the two part, a cascade of
+/// bifurcations where more than two are fused), every bar holds, and a `junctions_cascaded`
+/// warning says how the tree was meshed and why.
+#[test]
+fn daughters_leaving_a_junction_fused_are_meshed_as_a_cascade_of_bifurcations() {
+    let tree = mesh_random_tree(156, "cascade");
+    assert_tree_within_bars(&tree);
+    let seed = tree.seed;
+    let warnings = &tree.vessel.settings.warnings;
+    let cascade = warnings.iter().find(|w| w.kind == "junctions_cascaded");
+    let cascade = cascade.unwrap_or_else(|| panic!("tree {seed}: no junctions_cascaded warning"));
+    assert!(cascade.message.contains("refused"), "tree {seed}: {}", cascade.message);
+    let _ = std::fs::remove_dir_all(&tree.dir);
+}

@@ -381,7 +381,7 @@ pub(crate) fn mesh_vessel_on(
         }
     };
     checks::check_centerline_file(lumen_surface, centerlines)?;
-    policy::merged_then_apart(surface, lumen_surface, centerlines, config, progress)
+    policy::apart_then_cascaded(surface, lumen_surface, centerlines, config, progress)
 }
 
 /// Meshes a vessel from its indexed surface and its centerline tree (both in mm).

@@ -63,6 +63,12 @@ pub struct CenterlineConfig {
     /// aortic arch's first two supra-aortic branches (about 0.55 R apart) and keeps the third
     /// (about 2.4 R further) apart; 0 never merges.
     pub junction_merge_radii: f64,
+    /// Two daughters whose lumens are still fused where their junction's transitions would end
+    /// (each path within the other's inscribed tube past the junction's sphere) share a trunk to
+    /// where they part: the junction becomes a cascade of bifurcations. Off, only paths running
+    /// side by side (within a quarter radius for a radius) share one. A vessel refused, or short
+    /// of a bar, with it off is meshed again with it on, when that changes its tree.
+    pub split_fused_daughters: bool,
     /// The inlet of a branching tree, millimetres: the vessel end nearest this point. Without
     /// it: the first point of a single polyline, or the end of largest radius of a tree.
     pub inlet_mm: Option<[f64; 3]>,
@@ -87,6 +93,7 @@ impl Default for CenterlineConfig {
             trim_inlet: 0.0,
             trim_outlet: 0.0,
             junction_merge_radii: 1.0,
+            split_fused_daughters: false,
             inlet_mm: None,
             sacs_mm: Vec::new(),
             loop_cuts_mm: Vec::new(),

@@ -13,6 +13,9 @@
 //!   of a bar, with an overlapping pair's places where one is merged;
 //! - **close junctions apart** ([`merged_then_apart`]): a vessel refused or short of a bar with
 //!   close junctions merged is meshed again with only overlapping junctions merged;
+//! - **a cascade for fused daughters** ([`apart_then_cascaded`]): a vessel refused or short of
+//!   a bar whose daughters leave some junction fused is meshed again with each such pair on a
+//!   trunk of its own to where it parts;
 //! - **finishes** ([`junction_finish`]): the volume built with several junction optimisations
 //!   and walls, the best kept, with each junction's own nodes from the finish best for it;
 //! - **a sac deeper** ([`mesh_deepened_sac`]): a sac found on the surface that opens too close
@@ -94,6 +97,62 @@ pub(crate) fn merged_then_apart(
         }
         Err((merged, _)) => Err(merged),
     }
+}
+
+/// Meshes a vessel as [`merged_then_apart`] does; when it is refused or short of a bar, and
+/// some junction's daughters leave it fused (their lumens one past where the junction's
+/// transitions end: `CenterlineConfig::split_fused_daughters`), it is meshed again with each
+/// such pair on a trunk of its own to where the two part, and the better mesh kept (the first
+/// of equals). A junction's pages are laid across its centre; a pair fused past them has its
+/// two transitions funnel into one lumen, their folds a few degrees apart, and the pair's
+/// own bifurcation, where its lumens part, is where pages can separate them.
+pub(crate) fn apart_then_cascaded(
+    surface: &TriangleSurface,
+    lumen_surface: &LumenSurface,
+    centerlines: &Centerlines,
+    config: &MeshConfig,
+    progress: &mut Progress,
+) -> Result<Meshed> {
+    let first = merged_then_apart(surface, lumen_surface, centerlines, config, progress);
+    let within_bars = first.as_ref().is_ok_and(|m| FinishQuality::of_mesh(&m.mesh).meets_bars());
+    if within_bars || config.centerline.split_fused_daughters {
+        return first;
+    }
+    let cascaded = MeshConfig {
+        centerline: crate::data::config::CenterlineConfig { split_fused_daughters: true, ..config.centerline.clone() },
+        ..config.clone()
+    };
+    let build = |c: &MeshConfig| CenterlineTree::build(centerlines, &c.centerline, Some(lumen_surface)).ok();
+    let (Some(plain), Some(split)) = (build(config), build(&cascaded)) else { return first };
+    if !junctions_differ(&plain, &split) {
+        return first;
+    }
+    let first_was = match &first {
+        Ok(_) => "the mesh was short of a quality bar".to_string(),
+        Err(e) => format!("the vessel was refused: {e}"),
+    };
+    match better_of(first, merged_then_apart(surface, lumen_surface, centerlines, &cascaded, progress)) {
+        Ok((meshed, Kept::First)) => Ok(meshed),
+        Ok((mut meshed, Kept::Second)) => {
+            let moved = split.junctions.len().abs_diff(plain.junctions.len());
+            meshed.notes.push(Warning::new(
+                "junctions_cascaded",
+                format!(
+                    "daughters leaving a junction fused are meshed on a trunk of their own to where they part, a                      cascade of bifurcations ({} junctions, {moved} more than found;                      centerline.split_fused_daughters): without it, {first_was}",
+                    split.junctions.len()
+                ),
+            ));
+            Ok(meshed)
+        }
+        Err((first, _)) => Err(first),
+    }
+}
+
+/// Whether two trees of one vessel have their junctions in different places (or a different
+/// number of them).
+fn junctions_differ(a: &CenterlineTree, b: &CenterlineTree) -> bool {
+    a.junctions.len() != b.junctions.len()
+        || a.junctions.iter().zip(&b.junctions).any(|(x, y)| (x.centre - y.centre).norm() > 1e-9)
 }
 
 /// Which of two meshes of one vessel [`better_of`] kept.

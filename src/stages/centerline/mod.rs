@@ -198,7 +198,8 @@ impl CenterlineTree {
         let tags: Vec<_> = centerlines.polylines.iter().map(|l| l.cell_tags.clone()).collect();
         let skeleton = Skeleton::from_lines(lines, &tags, path)?;
         let inlet = choose_inlet(&skeleton, inlet_point, path)?;
-        let mut rooted = hang(skeleton, inlet, config.junction_merge_radii, forced, path)?;
+        let mut rooted =
+            hang(skeleton, inlet, config.junction_merge_radii, forced, config.split_fused_daughters, path)?;
         if let Some(surface) = surface {
             junction_centre::centre_junctions(&mut rooted, surface);
         }

@@ -42,19 +42,22 @@ pub(crate) struct ForcedMerge {
 
 /// Orients the skeleton from node `inlet`, joins pass-through nodes, merges junctions whose
 /// centres are closer than `merge_radii` times the upstream junction's radius (or that `forced`
-/// names), and orders the branches.
+/// names), and orders the branches. `cascade`: daughters still fused past their junction's
+/// sphere share a trunk to where they part ([`Parting::Fused`]).
 pub(crate) fn hang(
     skeleton: Skeleton,
     inlet: usize,
     merge_radii: f64,
     forced: &[ForcedMerge],
+    cascade: bool,
     source: &Path,
 ) -> Result<RootedTree> {
     let Skeleton { mut nodes, mut edges, .. } = skeleton;
     let (mut children, mut parent) = orient_from_inlet(&nodes, &mut edges, inlet, source)?;
 
     let first_parted = nodes.len();
-    split_shared_trunks(&mut nodes, &mut edges, &mut children, &mut parent, inlet);
+    let parting = if cascade { Parting::Fused } else { Parting::SideBySide };
+    split_shared_trunks(&mut nodes, &mut edges, &mut children, &mut parent, inlet, parting);
     let mut parted: Vec<bool> = (0..nodes.len()).map(|v| v >= first_parted).collect();
     let bfs = descendants(&children, &edges, inlet);
 
@@ -280,13 +283,43 @@ fn descendants(children: &[Vec<usize>], edges: &[Edge], inlet: usize) -> Vec<usi
     order
 }
 
-/// Where two lines from a common first point part: the first index of `a` farther than
-/// [`APART`] radii from `b`, when `a` has run along `b` for at least [`SHARED_TRUNK`] radii
-/// before it and goes on after it.
-fn parting(a: &Line, b: &Line) -> Option<usize> {
+/// When two daughters of a node share a trunk.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Parting {
+    /// Their paths run side by side: within [`APART`] radii of each other for at least
+    /// [`SHARED_TRUNK`] radii (paths drawn separately to two outlets through one vessel).
+    SideBySide,
+    /// Their lumens are still fused where the junction's transitions end: each path lies
+    /// within the other's inscribed tube (no farther from it than the larger of their radii,
+    /// VMTK's criterion for splitting branches) beyond the junction's sphere plus the
+    /// daughter's radius. A junction there would lay its pages across one lumen; the two share
+    /// a trunk to where they part, and the junction becomes a cascade of bifurcations. As
+    /// narrow as 12 degrees apart, two daughters of one radius part about five radii out.
+    Fused,
+}
+
+/// Where two lines from a node (radius `node_radius`) at their common first point part, as
+/// `rule` says: the index of `a`'s first point apart from `b`, when the two share a trunk
+/// before it and `a` goes on after it.
+fn parting(a: &Line, b: &Line, node_radius: f64, rule: Parting) -> Option<usize> {
     let arcs = a.arcs();
-    let k = (1..a.points.len()).find(|&k| b.closest(&a.points[k]).0 > APART * a.radii[k])?;
-    (k >= 2 && k + 1 < a.points.len() && arcs[k] >= SHARED_TRUNK * a.radii[k]).then_some(k)
+    let radius_of_b = |p: &Point3<f64>| {
+        let (_, seg, t) = b.closest(p);
+        b.radii[seg] * (1.0 - t) + b.radii[seg + 1] * t
+    };
+    let apart = |k: usize| {
+        let gap = b.closest(&a.points[k]).0;
+        match rule {
+            Parting::SideBySide => gap > APART * a.radii[k],
+            Parting::Fused => gap > a.radii[k].max(radius_of_b(&a.points[k])),
+        }
+    };
+    let k = (1..a.points.len()).find(|&k| apart(k))?;
+    let shared = match rule {
+        Parting::SideBySide => arcs[k] >= SHARED_TRUNK * a.radii[k],
+        Parting::Fused => arcs[k] >= node_radius + a.radii[k],
+    };
+    (k >= 2 && k + 1 < a.points.len() && shared).then_some(k)
 }
 
 /// Daughters that leave a node side by side and part only later (paths drawn separately to two
@@ -300,40 +333,56 @@ fn split_shared_trunks(
     children: &mut Vec<Vec<usize>>,
     parent: &mut Vec<Option<usize>>,
     inlet: usize,
+    rule: Parting,
 ) {
     let mut work = vec![inlet];
     while let Some(u) = work.pop() {
         'again: loop {
-            for i in 0..children[u].len() {
-                for j in 0..children[u].len() {
-                    let (ea, eb) = (children[u][i], children[u][j]);
-                    if i == j {
-                        continue;
-                    }
-                    let Some(k) = parting(&edges[ea].line, &edges[eb].line) else { continue };
-                    let Some((trunk, tail_a, tail_b)) = part_lines(&edges[ea].line, &edges[eb].line, k) else {
-                        continue;
-                    };
-                    let w = nodes.len();
-                    let last = trunk.points.len() - 1;
-                    nodes.push(Node { point: trunk.points[last], radius: trunk.radii[last], key: i64::MAX });
-                    let t = edges.len();
-                    edges.push(Edge { ends: [u, w], line: trunk, source: edges[ea].source });
-                    edges[ea].line = tail_a;
-                    edges[ea].ends[0] = w;
-                    edges[eb].line = tail_b;
-                    edges[eb].ends[0] = w;
-                    children[u].retain(|&e| e != ea && e != eb);
-                    children[u].push(t);
-                    children.push(vec![ea, eb]);
-                    parent.push(Some(t));
-                    continue 'again;
-                }
+            for (i, j) in pairs_to_part(&children[u], edges, nodes[u].radius, rule) {
+                let (ea, eb) = (children[u][i], children[u][j]);
+                let Some(k) = parting(&edges[ea].line, &edges[eb].line, nodes[u].radius, rule) else { continue };
+                let Some((trunk, tail_a, tail_b)) = part_lines(&edges[ea].line, &edges[eb].line, k) else {
+                    continue;
+                };
+                let w = nodes.len();
+                let last = trunk.points.len() - 1;
+                nodes.push(Node { point: trunk.points[last], radius: trunk.radii[last], key: i64::MAX });
+                let t = edges.len();
+                edges.push(Edge { ends: [u, w], line: trunk, source: edges[ea].source });
+                edges[ea].line = tail_a;
+                edges[ea].ends[0] = w;
+                edges[eb].line = tail_b;
+                edges[eb].ends[0] = w;
+                children[u].retain(|&e| e != ea && e != eb);
+                children[u].push(t);
+                children.push(vec![ea, eb]);
+                parent.push(Some(t));
+                continue 'again;
             }
             break;
         }
         work.extend(children[u].iter().map(|&e| edges[e].ends[1]));
     }
+}
+
+/// The ordered pairs of a node's daughters (indices into `daughters`) to try for a shared
+/// trunk: side by side, every pair in order; fused, the pair fused longest first (it parts
+/// last, so its trunk is the innermost, and a third daughter fused with both parts from that
+/// trunk nearer the junction), then the rest in order.
+fn pairs_to_part(daughters: &[usize], edges: &[Edge], node_radius: f64, rule: Parting) -> Vec<(usize, usize)> {
+    let n = daughters.len();
+    let mut pairs: Vec<(usize, usize)> =
+        (0..n).flat_map(|i| (0..n).map(move |j| (i, j))).filter(|(i, j)| i != j).collect();
+    if rule == Parting::Fused {
+        let shared = |&(i, j): &(usize, usize)| {
+            let (a, b) = (&edges[daughters[i]].line, &edges[daughters[j]].line);
+            parting(a, b, node_radius, rule).map_or(0.0, |k| a.arcs()[k])
+        };
+        let mut keyed: Vec<(f64, (usize, usize))> = pairs.iter().map(|p| (shared(p), *p)).collect();
+        keyed.sort_by(|x, y| y.0.total_cmp(&x.0).then(x.1.cmp(&y.1)));
+        pairs = keyed.into_iter().map(|(_, p)| p).collect();
+    }
+    pairs
 }
 
 /// The trunk (mean of `a` and `b` up to point `k - 1` of `a`, the last one before they part)
@@ -419,7 +468,7 @@ mod tests {
         ];
         let mut children = vec![vec![0], vec![1, 2], vec![], vec![]];
         let mut parent = vec![None, Some(0), Some(1), Some(2)];
-        split_shared_trunks(&mut nodes, &mut edges, &mut children, &mut parent, 0);
+        split_shared_trunks(&mut nodes, &mut edges, &mut children, &mut parent, 0, Parting::SideBySide);
 
         assert_eq!(nodes.len(), 5, "one new node");
         let w = 4;
@@ -448,10 +497,57 @@ mod tests {
         ];
         let mut children2 = vec![vec![0], vec![1, 2], vec![], vec![]];
         let mut parent2 = vec![None, Some(0), Some(1), Some(2)];
-        split_shared_trunks(&mut nodes2, &mut edges2, &mut children2, &mut parent2, 0);
+        split_shared_trunks(&mut nodes2, &mut edges2, &mut children2, &mut parent2, 0, Parting::SideBySide);
         assert_eq!(nodes2.len(), 4);
         assert_eq!(children2[1], vec![1, 2]);
     }
+    /// A junction at (0, 0, 10) of radius 1 with three daughters of radius 1 up z: two leave 12
+    /// degrees apart (their paths a radius apart about 4.8 radii out, past the junction's sphere
+    /// and a radius: fused), the third 60 degrees from them. Fused, the 12-degree pair shares a
+    /// trunk to where they are a radius apart; side by side, they part at once (a quarter radius
+    /// 1.2 radii out, which a close merge takes back), and the 60-degree daughter never.
+    #[test]
+    fn daughters_fused_past_their_junction_share_a_trunk_to_where_their_lumens_part() {
+        let ray = |deg: f64| {
+            let (s, c) = deg.to_radians().sin_cos();
+            line((0..=60).map(|i| i as f64 * 0.2).map(|t| Point3::new(s * t, 0.0, 10.0 + c * t)).collect())
+        };
+        let build = |rule: Parting| {
+            let node = |p: Point3<f64>| Node { point: p, radius: 1.0, key: 0 };
+            let daughters = [ray(-6.0), ray(6.0), ray(66.0)];
+            let mut nodes = vec![node(Point3::origin()), node(Point3::new(0.0, 0.0, 10.0))];
+            nodes.extend(daughters.iter().map(|d| node(*d.points.last().unwrap())));
+            let inlet = line((0..=10).map(|i| Point3::new(0.0, 0.0, i as f64)).collect());
+            let mut edges = vec![Edge { ends: [0, 1], line: inlet, source: 0 }];
+            edges.extend(daughters.into_iter().enumerate().map(|(i, l)| Edge {
+                ends: [1, i + 2],
+                line: l,
+                source: i + 1,
+            }));
+            let mut children = vec![vec![0], vec![1, 2, 3], vec![], vec![], vec![]];
+            let mut parent = vec![None, Some(0), Some(1), Some(2), Some(3)];
+            split_shared_trunks(&mut nodes, &mut edges, &mut children, &mut parent, 0, rule);
+            (nodes, edges, children)
+        };
+        let (nodes, edges, children) = build(Parting::Fused);
+        assert_eq!(nodes.len(), 6, "one new junction");
+        let w = 5;
+        assert_eq!(children[1].len(), 2, "the junction keeps the 60-degree daughter and the trunk");
+        assert!(children[1].contains(&3));
+        assert_eq!(children[w], vec![1, 2], "the fused pair leaves the new junction");
+        let out = nodes[w].point - nodes[1].point;
+        assert!(out.x.abs() < 0.05 && (4.0..5.0).contains(&out.z), "parts about 4.8 radii out on the mean: {out:?}");
+        for e in [1, 2] {
+            assert_eq!(edges[e].line.points[0], nodes[w].point, "edge {e} starts at the new junction");
+        }
+        let gap = (edges[1].line.points[1] - edges[2].line.points[1]).norm();
+        assert!(gap > 0.95, "past the new junction the pair is a radius apart: {gap}");
+        let (nodes, _, children) = build(Parting::SideBySide);
+        assert_eq!(nodes.len(), 6, "side by side the pair parts too");
+        assert!((nodes[5].point - nodes[1].point).norm() < 1.5, "but at once: {:?}", nodes[5].point);
+        assert_eq!(children[1].len(), 2);
+    }
+
     /// A junction at (0, 0, 10) with a side branch along +x and a 6 mm trunk up z that divides
     /// at (0, 0, 16): merged with the centre put 3/4 along the trunk, the inlet runs on to
     /// (0, 0, 14.5), the trunk's daughters start there (their lines keep the trunk's last 1.5 mm),
@@ -483,7 +579,7 @@ mod tests {
             Edge { ends: [3, 5], line: right, source: 4 },
         ];
         let skeleton = Skeleton { nodes, edges, file_start: Some(0), layout: "test" };
-        let tree = hang(skeleton, 0, 0.0, &[ForcedMerge { segment: 2, at: 0.75 }], Path::new("t")).unwrap();
+        let tree = hang(skeleton, 0, 0.0, &[ForcedMerge { segment: 2, at: 0.75 }], false, Path::new("t")).unwrap();
         let centre = Point3::new(0.0, 0.0, 14.5);
         assert_eq!(tree.children[1].len(), 3, "one junction of three daughters");
         assert!((tree.nodes[1].point - centre).norm() < 1e-12, "{:?}", tree.nodes[1].point);
