@@ -134,12 +134,14 @@ pub(crate) fn apart_then_cascaded(
     match better_of(first, merged_then_apart(surface, lumen_surface, centerlines, &cascaded, progress)) {
         Ok((meshed, Kept::First)) => Ok(meshed),
         Ok((mut meshed, Kept::Second)) => {
-            let moved = split.junctions.len().abs_diff(plain.junctions.len());
             meshed.notes.push(Warning::new(
                 "junctions_cascaded",
                 format!(
-                    "daughters leaving a junction fused are meshed on a trunk of their own to where they part, a                      cascade of bifurcations ({} junctions, {moved} more than found;                      centerline.split_fused_daughters): without it, {first_was}",
-                    split.junctions.len()
+                    "daughters leaving a junction fused are meshed on a trunk of their own to where they part, a \
+                     cascade of bifurcations ({} junctions where {} were found; centerline.split_fused_daughters): \
+                     without it, {first_was}",
+                    split.junctions.len(),
+                    plain.junctions.len()
                 ),
             ));
             Ok(meshed)
