@@ -326,7 +326,8 @@ fn parting(a: &Line, b: &Line, node_radius: f64, rule: Parting) -> Option<usize>
 /// outlets through one common vessel, as gmsh's centerlines of the arch run to the
 /// brachiocephalic and left carotid arteries through their common origin) become a trunk, the
 /// mean of the two up to where they part, and a junction there. Without this the two would
-/// leave the upstream junction in the same direction, which no book of pages can order.
+/// leave the upstream junction in the same direction, which no book of pages can order. Under
+/// [`Parting::Fused`] so do daughters whose lumens are still fused past the node's sphere.
 fn split_shared_trunks(
     nodes: &mut Vec<Node>,
     edges: &mut Vec<Edge>,
