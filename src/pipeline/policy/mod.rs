@@ -100,7 +100,7 @@ pub(crate) fn merged_then_apart(
 }
 
 /// Meshes a vessel as [`merged_then_apart`] does; when it is refused or short of a bar, and
-/// some junction's daughters leave it fused (their lumens one past where the junction's
+/// some junction's daughters leave it fused (their lumens still one where the junction's
 /// transitions end: `CenterlineConfig::split_fused_daughters`), it is meshed again with each
 /// such pair on a trunk of its own to where the two part, and the better mesh kept (the first
 /// of equals). A junction's pages are laid across its centre; a pair fused past them has its
