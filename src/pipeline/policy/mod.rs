@@ -78,24 +78,36 @@ pub(crate) fn merged_then_apart(
         centerline: crate::data::config::CenterlineConfig { junction_merge_radii: 0.0, ..config.centerline.clone() },
         ..config.clone()
     };
-    let merged_was = match &merged {
+    let retry = books_then_sectors(surface, lumen_surface, centerlines, &apart, progress);
+    keep_better_noting_retry(merged, retry, "junctions_apart", |merged_was| {
+        format!(
+            "junctions closer than centerline.junction_merge_radii ({}) are meshed apart, merged only where their \
+             blocks overlap: merged, {merged_was}",
+            config.centerline.junction_merge_radii
+        )
+    })
+}
+
+/// The better of a first attempt and a retry of one vessel ([`better_of`]); a retry kept says
+/// so in a warning of `kind`, its message from `why` given how the first attempt fell short.
+/// Both refused: the first refusal.
+fn keep_better_noting_retry(
+    first: Result<Meshed>,
+    retry: Result<Meshed>,
+    kind: &'static str,
+    why: impl FnOnce(&str) -> String,
+) -> Result<Meshed> {
+    let first_was = match &first {
         Ok(_) => "the mesh was short of a quality bar".to_string(),
         Err(e) => format!("the vessel was refused: {e}"),
     };
-    match better_of(merged, books_then_sectors(surface, lumen_surface, centerlines, &apart, progress)) {
+    match better_of(first, retry) {
         Ok((meshed, Kept::First)) => Ok(meshed),
         Ok((mut meshed, Kept::Second)) => {
-            meshed.notes.push(Warning::new(
-                "junctions_apart",
-                format!(
-                    "junctions closer than centerline.junction_merge_radii ({}) are meshed apart, merged only \
-                     where their blocks overlap: merged, {merged_was}",
-                    config.centerline.junction_merge_radii
-                ),
-            ));
+            meshed.notes.push(Warning::new(kind, why(&first_was)));
             Ok(meshed)
         }
-        Err((merged, _)) => Err(merged),
+        Err((first, _)) => Err(first),
     }
 }
 
@@ -127,27 +139,16 @@ pub(crate) fn apart_then_cascaded(
     if !junctions_differ(&plain, &split) {
         return first;
     }
-    let first_was = match &first {
-        Ok(_) => "the mesh was short of a quality bar".to_string(),
-        Err(e) => format!("the vessel was refused: {e}"),
-    };
-    match better_of(first, merged_then_apart(surface, lumen_surface, centerlines, &cascaded, progress)) {
-        Ok((meshed, Kept::First)) => Ok(meshed),
-        Ok((mut meshed, Kept::Second)) => {
-            meshed.notes.push(Warning::new(
-                "junctions_cascaded",
-                format!(
-                    "daughters leaving a junction fused are meshed on a trunk of their own to where they part, a \
-                     cascade of bifurcations ({} junctions where {} were found; centerline.split_fused_daughters): \
-                     without it, {first_was}",
-                    split.junctions.len(),
-                    plain.junctions.len()
-                ),
-            ));
-            Ok(meshed)
-        }
-        Err((first, _)) => Err(first),
-    }
+    let retry = merged_then_apart(surface, lumen_surface, centerlines, &cascaded, progress);
+    keep_better_noting_retry(first, retry, "junctions_cascaded", |first_was| {
+        format!(
+            "daughters leaving a junction fused are meshed on a trunk of their own to where they part, a cascade of \
+             bifurcations ({} junctions where {} were found; centerline.split_fused_daughters): without it, \
+             {first_was}",
+            split.junctions.len(),
+            plain.junctions.len()
+        )
+    })
 }
 
 /// Whether two trees of one vessel have their junctions in different places (or a different
